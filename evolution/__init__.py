@@ -1,0 +1,1 @@
+"""NEAT on population tensors (see DESIGN.md, "Population as tensors")."""

@@ -1,0 +1,49 @@
+"""Decoders: spikes to rates and to forces."""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor
+
+__all__ = ["firing_rate", "weighted_rate_force", "bang_bang_force"]
+
+
+def firing_rate(spikes: Tensor, *, dt_ms: float, dim: int = 0) -> Tensor:
+    """Mean firing rate (Hz) of ``spikes`` (0/1 per step of ``dt_ms`` ms) along ``dim``.
+
+    An empty window has no defined rate and raises ``ValueError``.
+    """
+    if not (math.isfinite(dt_ms) and dt_ms > 0):
+        raise ValueError(f"dt_ms must be a positive finite number of milliseconds, got {dt_ms!r}")
+    steps = spikes.shape[dim]
+    if steps == 0:
+        raise ValueError(f"spikes has no time steps along dim {dim}")
+    return spikes.sum(dim) * (1000.0 / (steps * dt_ms))
+
+
+def weighted_rate_force(
+    rates: Tensor, weights: Tensor, sigma: Tensor | float, *, f_max: float = 10.0
+) -> Tensor:
+    """Qiu et al.'s force: ``F = f_max (2 sigmoid(sigma * sum_i w_i r_i) - 1)`` (N).
+
+    Args:
+        rates: firing rates ``r_i`` (Hz), shape ``[..., K]``.
+        weights: connection weights ``w_i`` to the output, broadcastable to ``rates``.
+        sigma: decoder gain (1/Hz per unit weight), broadcastable to ``rates.shape[:-1]``.
+        f_max: force magnitude bound (N); the paper uses 10 N.
+
+    Returns:
+        Force in ``(-f_max, f_max)``, shape ``rates.shape[:-1]``.
+    """
+    drive = (rates * weights).sum(-1)
+    return f_max * (2.0 * torch.sigmoid(sigma * drive) - 1.0)
+
+
+def bang_bang_force(drive: Tensor, *, threshold: float | Tensor, f_max: float = 10.0) -> Tensor:
+    """Binary force: ``+f_max`` (N) where ``drive >= threshold``, else ``-f_max``.
+
+    Qiu et al.'s Markov task pushes with +-10 N decided from the output's firing rate.
+    """
+    return torch.where(drive >= threshold, f_max, -f_max).to(drive.dtype)

@@ -1,0 +1,173 @@
+"""Population-batched recurrent Izhikevich networks.
+
+``P`` networks of ``N`` neurons each, one weight matrix per network: ``weight[p, i, j]`` is
+the synapse from neuron ``i`` (pre) to neuron ``j`` (post), the NEAT connection slot
+``(i, j)``. Semantics are synchronous with a one-step delay: at every step each neuron
+receives ``I = i_ext + sum_i w[i, j] z_prev[i]``, a single batched matmul for the whole
+population, so any recurrence (self loops included) needs no topological sort.
+
+The state may carry extra batch axes between ``P`` and ``N`` (``[P, B, N]``), for example
+several episodes per network.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import torch
+from torch import Tensor
+
+from snn_torch.functional.izhikevich import (
+    DEFAULT_DT_MS,
+    DEFAULT_METHOD,
+    DEFAULT_V0_MV,
+    IzhikevichParams,
+    IzhikevichState,
+    check_current,
+    check_dt,
+    izhikevich_init,
+    izhikevich_step,
+)
+from snn_torch.functional.threshold import SpikeFn, heaviside
+
+__all__ = [
+    "RecurrentState",
+    "masked_weights",
+    "recurrent_init",
+    "recurrent_izhikevich_step",
+    "recurrent_izhikevich_run",
+]
+
+
+class RecurrentState(NamedTuple):
+    """``v`` (mV), ``u`` (mV/ms) and ``z`` the previous step's spikes, each ``[P, ..., N]``."""
+
+    v: Tensor
+    u: Tensor
+    z: Tensor
+
+
+def masked_weights(weight: Tensor, mask: Tensor) -> Tensor:
+    """``weight`` where ``mask`` is True, else exactly 0 (even for inf or NaN weights).
+
+    Raises ``ValueError`` naming the argument on a shape, dtype or rank mismatch.
+    """
+    if not isinstance(weight, Tensor) or weight.dim() != 3 or weight.shape[-1] != weight.shape[-2]:
+        shape = tuple(weight.shape) if isinstance(weight, Tensor) else type(weight).__name__
+        raise ValueError(f"weight must be a [P, N, N] tensor, got {shape}")
+    if not weight.is_floating_point():
+        raise ValueError(f"weight must be floating point, got {weight.dtype}")
+    if not isinstance(mask, Tensor) or mask.shape != weight.shape:
+        shape = tuple(mask.shape) if isinstance(mask, Tensor) else type(mask).__name__
+        raise ValueError(f"mask must have weight's shape {tuple(weight.shape)}, got {shape}")
+    if mask.dtype != torch.bool:
+        raise ValueError(f"mask must be a bool tensor, got {mask.dtype}")
+    if mask.device != weight.device:
+        raise ValueError(f"mask is on {mask.device}, but weight is on {weight.device}")
+    return torch.where(mask, weight, torch.zeros((), dtype=weight.dtype, device=weight.device))
+
+
+def recurrent_init(
+    shape: tuple[int, ...] | torch.Size,
+    p: IzhikevichParams,
+    *,
+    v0_mv: float = DEFAULT_V0_MV,
+    device: torch.device | str | None = None,
+    dtype: torch.dtype = torch.float32,
+) -> RecurrentState:
+    """Rest state for ``shape = (P, ..., N)``: ``v = v0_mv``, ``u = b v``, no spikes."""
+    v, u = izhikevich_init(shape, p, v0_mv=v0_mv, device=device, dtype=dtype)
+    return RecurrentState(v, u, torch.zeros_like(v))
+
+
+def _synaptic_current(z: Tensor, w_eff: Tensor) -> Tensor:
+    # [P, ..., N] -> [P, B, N] @ [P, N, N]: the one batched matmul of a step.
+    flat = z.reshape(z.shape[0], -1, z.shape[-1])
+    return torch.bmm(flat, w_eff).reshape(z.shape)
+
+
+def recurrent_izhikevich_step(
+    i_ext: Tensor,
+    state: RecurrentState,
+    w_eff: Tensor,
+    p: IzhikevichParams,
+    *,
+    dt_ms: float = DEFAULT_DT_MS,
+    method: str = DEFAULT_METHOD,
+    spike_fn: SpikeFn = heaviside,
+    substep_reset: bool = True,
+    validate: bool = True,
+) -> tuple[Tensor, RecurrentState]:
+    """One step of ``P`` recurrent networks.
+
+    Args:
+        i_ext: external current (mV/ms) broadcastable to the state, ``[P, ..., N]``.
+        state: ``RecurrentState`` before the step.
+        w_eff: effective weights ``[P, N, N]`` (pre x post), already masked
+            (``masked_weights``), in the state's dtype.
+        Others as ``izhikevich_step``.
+
+    Returns:
+        ``(z, new_state)`` with ``z`` the spikes of this step, ``[P, ..., N]``.
+    """
+    if validate:
+        dt_ms = check_dt(dt_ms)
+        _check_weights(w_eff, state.v)
+        check_current("i_ext", i_ext, state.v)
+    i_total = i_ext + _synaptic_current(state.z, w_eff)
+    z, (v, u) = izhikevich_step(
+        i_total, IzhikevichState(state.v, state.u), p, dt_ms=dt_ms, method=method,
+        spike_fn=spike_fn, substep_reset=substep_reset, validate=False,
+    )
+    return z, RecurrentState(v, u, z)
+
+
+def _check_weights(w_eff: Tensor, v: Tensor) -> None:
+    if w_eff.dim() != 3 or w_eff.shape[0] != v.shape[0] or w_eff.shape[1:] != (v.shape[-1],) * 2:
+        raise ValueError(
+            f"weights must be [P, N, N] = [{v.shape[0]}, {v.shape[-1]}, {v.shape[-1]}] for a "
+            f"state of shape {tuple(v.shape)}, got {tuple(w_eff.shape)}"
+        )
+    if w_eff.dtype != v.dtype or w_eff.device != v.device:
+        raise ValueError(
+            f"weights are {w_eff.dtype} on {w_eff.device}, but the state is {v.dtype} on {v.device}"
+        )
+
+
+def recurrent_izhikevich_run(
+    i_ext: Tensor,
+    state: RecurrentState,
+    w_eff: Tensor,
+    p: IzhikevichParams,
+    *,
+    dt_ms: float = DEFAULT_DT_MS,
+    method: str = DEFAULT_METHOD,
+    spike_fn: SpikeFn = heaviside,
+    substep_reset: bool = True,
+    validate: bool = True,
+) -> tuple[Tensor, RecurrentState]:
+    """Run ``T = i_ext.shape[0]`` steps; returns spikes ``[T, P, ..., N]`` and the last state.
+
+    Inputs are validated once; the result equals ``T`` calls of the step, bit for bit.
+    """
+    if validate:
+        dt_ms = check_dt(dt_ms)
+        _check_weights(w_eff, state.v)
+        if not isinstance(i_ext, Tensor) or i_ext.dim() < 1:
+            raise ValueError("i_ext must be a tensor with time as its first dimension")
+        if i_ext.shape[0] > 0:
+            check_current("i_ext[t]", i_ext[0], state.v, check_finite=False)
+        if not bool(torch.isfinite(i_ext).all()):
+            raise ValueError("i_ext holds NaN or inf")
+        if not bool(torch.isfinite(w_eff).all()):
+            raise ValueError("weights hold NaN or inf where the mask is True")
+    spikes = []
+    for t in range(i_ext.shape[0]):
+        z, state = recurrent_izhikevich_step(
+            i_ext[t], state, w_eff, p, dt_ms=dt_ms, method=method, spike_fn=spike_fn,
+            substep_reset=substep_reset, validate=False,
+        )
+        spikes.append(z)
+    if not spikes:
+        return state.v.new_zeros((0, *state.v.shape)), state
+    return torch.stack(spikes), state

@@ -1,0 +1,1 @@
+"""Control tasks, the paper's experiments and the ``snn-neat`` command."""
