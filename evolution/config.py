@@ -1,0 +1,226 @@
+"""``NEATConfig``: every knob of tensor NEAT, validated, with sourced defaults.
+
+Sources of the defaults, cited per field:
+- [Qiu19] Qiu, Garratt, Howard & Anavatti 2019 (the reference paper, ``shared/paper``).
+- [NEAT02] Stanley & Miikkulainen 2002, "Evolving Neural Networks through Augmenting
+  Topologies", Evolutionary Computation 10(2), section 4.1 (parameters of the XOR and
+  pole-balancing experiments).
+- [NP] neat-python's defaults, where neither paper says.
+
+Field names follow neat-python's INI keys where a key exists, so ``NEATConfig.from_ini``
+reads a neat-python config file; ``[Qiu19]``-specific knobs (``sigma_*``,
+``compatibility_sigma_coefficient``) extend it.
+"""
+
+from __future__ import annotations
+
+import configparser
+import dataclasses
+import math
+import os
+from dataclasses import dataclass, field, fields
+
+__all__ = ["NEATConfig", "ConfigError"]
+
+
+class ConfigError(ValueError):
+    """A config value is out of range or of the wrong type; the message names the field."""
+
+
+def _range(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False, hi_open: bool = False,
+           integer: bool = False) -> dict:
+    return {"range": (lo, hi, lo_open, hi_open), "integer": integer}
+
+
+@dataclass(frozen=True)
+class NEATConfig:
+    """Tensor-NEAT configuration. Immutable; ``dataclasses.replace`` makes variants."""
+
+    # --- network layout --------------------------------------------------------------
+    num_inputs: int = field(default=2, metadata=_range(1, None, integer=True))
+    num_outputs: int = field(default=1, metadata=_range(1, None, integer=True))
+    # [NEAT02] uses a bias input with constant activation 1; spiking controllers in
+    # [Qiu19] have none (their neurons get a background current instead).
+    num_bias: int = field(default=1, metadata=_range(0, None, integer=True))
+    # Hidden-node slots per genome index. Fixed, so a run's numbers never depend on the
+    # other runs in its batch; slots no genome of a run uses any more are reclaimed, so a
+    # run never dies of a full index (an add-node that finds no free slot is skipped and
+    # counted in the statistics).
+    max_hidden: int = field(default=32, metadata=_range(0, None, integer=True))
+    # [Qiu19] start: each input wired to each output, nothing else. neat-python's "full"
+    # start for recurrent nets also adds output self-loops: ``initial_self_loops=True``.
+    initial_self_loops: bool = False
+    # Feed-forward only (no cycles): [NEAT02]'s XOR. Spiking controllers are recurrent.
+    feed_forward: bool = False
+
+    # --- population and termination -------------------------------------------------
+    pop_size: int = field(default=150, metadata=_range(2, None, integer=True))  # [Qiu19], [NEAT02]
+    fitness_threshold: float = math.inf  # [NP] key; run(..., fitness_target) overrides
+
+    # --- connection genes -----------------------------------------------------------
+    weight_init_mean: float = 0.0  # [NP]
+    weight_init_stdev: float = field(default=1.0, metadata=_range(0, None))  # [NP]
+    weight_max_value: float = field(default=30.0, metadata=_range(0, None, lo_open=True))  # [NP]
+    weight_min_value: float = -30.0  # [NP]
+    # [NEAT02]: 80 % of genomes get weight mutations; each weight then is perturbed (90 %)
+    # or replaced by a new random value (10 %).
+    weight_mutate_rate: float = field(default=0.8, metadata=_range(0, 1))
+    weight_replace_rate: float = field(default=0.1, metadata=_range(0, 1))
+    weight_mutate_power: float = field(default=0.5, metadata=_range(0, None))  # [NP] Gaussian stdev
+    conn_add_prob: float = field(default=0.1, metadata=_range(0, 1))  # [Qiu19], [NEAT02] small pops
+    node_add_prob: float = field(default=0.03, metadata=_range(0, 1))  # [Qiu19], [NEAT02]
+    # [NP] enabled_mutate_rate: per-gene chance to flip the enabled flag.
+    enabled_mutate_rate: float = field(default=0.01, metadata=_range(0, 1))
+    # [NEAT02]: a gene disabled in either parent is disabled in the child with 75 % chance.
+    disabled_inherit_prob: float = field(default=0.75, metadata=_range(0, 1))
+
+    # --- decoder gain sigma ([Qiu19] eq. 12; values are ours, [Qiu19] gives none) -----
+    sigma_init_mean: float = field(default=1.0, metadata=_range(0, None, lo_open=True))
+    sigma_init_stdev: float = field(default=0.0, metadata=_range(0, None))
+    sigma_mutate_rate: float = field(default=0.2, metadata=_range(0, 1))
+    sigma_mutate_power: float = field(default=0.1, metadata=_range(0, None))
+    sigma_min_value: float = field(default=1e-3, metadata=_range(0, None, lo_open=True))  # positive [Qiu19]
+    sigma_max_value: float = field(default=10.0, metadata=_range(0, None, lo_open=True))
+
+    # --- speciation: delta = c1 E/N + c2 D/N + c3 W + c4 |sigma_a - sigma_b| ----------
+    # Slot markings carry no creation order, so excess and disjoint genes are told apart by
+    # slot order (a gene beyond the other genome's highest occupied slot is excess).
+    compatibility_excess_coefficient: float = field(default=1.0, metadata=_range(0, None))  # [NEAT02] c1
+    compatibility_disjoint_coefficient: float = field(default=1.0, metadata=_range(0, None))  # [NEAT02] c2
+    compatibility_weight_coefficient: float = field(default=0.4, metadata=_range(0, None))  # [NEAT02] c3
+    compatibility_sigma_coefficient: float = field(default=1.0, metadata=_range(0, None))  # [Qiu19] c4; value ours
+    compatibility_threshold: float = field(default=3.0, metadata=_range(0, None, lo_open=True))  # [NEAT02]
+    # [NEAT02]: N = genes in the larger genome, but N = 1 when both have fewer than 20.
+    compatibility_normalize_min_genes: int = field(default=20, metadata=_range(1, None, integer=True))
+
+    # --- stagnation ------------------------------------------------------------------
+    max_stagnation: int = field(default=15, metadata=_range(1, None, integer=True))  # [NEAT02]
+    # Species protected from stagnation (the best ones); [NEAT02] keeps the top 2.
+    species_elitism: int = field(default=2, metadata=_range(0, None, integer=True))
+    # When every species of a run is gone: restart that run from a fresh population [NP].
+    reset_on_extinction: bool = True
+
+    # --- reproduction ([Qiu19]: (150,150)-ES plus species elitism) ---------------------
+    survival_threshold: float = field(default=0.2, metadata=_range(0, 1, lo_open=True))  # [Qiu19] best 20 %
+    # [Qiu19]: the champion of each species with more than 5 members is copied unchanged.
+    elitism_min_species_size: int = field(default=6, metadata=_range(1, None, integer=True))
+    # [NEAT02]: 25 % of offspring come from mutation alone, 75 % from crossover.
+    crossover_prob: float = field(default=0.75, metadata=_range(0, 1))
+    # [NEAT02]: interspecies mating rate 0.001.
+    interspecies_crossover_prob: float = field(default=0.001, metadata=_range(0, 1))
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.type in ("bool", bool):
+                if not isinstance(value, bool):
+                    raise ConfigError(f"NEATConfig.{f.name} must be true or false, got {value!r}")
+                continue
+            spec = f.metadata
+            integer = spec.get("integer", False)
+            if integer:
+                if isinstance(value, bool) or not isinstance(value, int):
+                    raise ConfigError(f"NEATConfig.{f.name} must be an integer, got {value!r}")
+            elif isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value):
+                raise ConfigError(f"NEATConfig.{f.name} must be a number, got {value!r}")
+            lo, hi, lo_open, hi_open = spec.get("range", (None, None, False, False))
+            bad_lo = lo is not None and (value <= lo if lo_open else value < lo)
+            bad_hi = hi is not None and (value >= hi if hi_open else value > hi)
+            if bad_lo or bad_hi or (not integer and f.name != "fitness_threshold" and math.isinf(value)):
+                raise ConfigError(f"NEATConfig.{f.name} must be in {_describe(lo, hi, lo_open, hi_open)}, got {value!r}")
+        if self.weight_min_value >= self.weight_max_value:
+            raise ConfigError(
+                f"NEATConfig.weight_min_value ({self.weight_min_value}) must be below weight_max_value "
+                f"({self.weight_max_value})")
+        if self.sigma_min_value > self.sigma_max_value:
+            raise ConfigError(
+                f"NEATConfig.sigma_min_value ({self.sigma_min_value}) must not exceed sigma_max_value "
+                f"({self.sigma_max_value})")
+
+    # --- derived layout --------------------------------------------------------------
+    @property
+    def num_nodes(self) -> int:
+        """Capacity of the node index: inputs, bias, outputs, then hidden slots."""
+        return self.num_inputs + self.num_bias + self.num_outputs + self.max_hidden
+
+    @property
+    def first_output(self) -> int:
+        return self.num_inputs + self.num_bias
+
+    @property
+    def first_hidden(self) -> int:
+        return self.num_inputs + self.num_bias + self.num_outputs
+
+    # --- INI -------------------------------------------------------------------------
+    @classmethod
+    def from_ini(cls, path: str | os.PathLike, **overrides) -> NEATConfig:
+        """Read a neat-python-style INI file (any section); unknown keys raise ``ConfigError``.
+
+        Keys neat-python has that this implementation does not use (activation options,
+        node bias/response genes, ...) are listed in ``IGNORED_INI_KEYS`` and skipped.
+        """
+        parser = configparser.ConfigParser()
+        try:
+            with open(path, encoding="utf-8") as fh:
+                parser.read_file(fh)
+        except (OSError, configparser.Error) as exc:
+            raise ConfigError(f"cannot read NEAT config {os.fspath(path)!r}: {exc}") from exc
+        known = {f.name: f for f in fields(cls)}
+        values: dict = {}
+        for section in parser.sections():
+            for key, raw in parser.items(section):
+                key = INI_ALIASES.get(key, key)
+                if key == "num_hidden" and raw.strip() not in ("0", ""):
+                    raise ConfigError(f"{os.fspath(path)}: [{section}] num_hidden must be 0: genomes "
+                                      "start from inputs wired to outputs")
+                if key in IGNORED_INI_KEYS:
+                    continue
+                if key not in known:
+                    raise ConfigError(f"{os.fspath(path)}: [{section}] {key} is not a NEATConfig field")
+                values[key] = _parse(known[key], raw, f"{os.fspath(path)}: [{section}] {key}")
+        values.update(overrides)
+        return cls(**values)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+INI_ALIASES = {"initial_connection": "_initial_connection"}
+IGNORED_INI_KEYS = {
+    "fitness_criterion", "no_fitness_termination", "_initial_connection", "num_hidden",
+    "activation_default", "activation_mutate_rate", "activation_options", "aggregation_default",
+    "aggregation_mutate_rate", "aggregation_options", "bias_init_mean", "bias_init_stdev",
+    "bias_max_value", "bias_min_value", "bias_mutate_power", "bias_mutate_rate", "bias_replace_rate",
+    "bias_init_type", "response_init_mean", "response_init_stdev", "response_max_value",
+    "response_min_value", "response_mutate_power", "response_mutate_rate", "response_replace_rate",
+    "response_init_type", "conn_delete_prob", "node_delete_prob", "enabled_default",
+    "enabled_rate_to_true_add", "enabled_rate_to_false_add", "single_structural_mutation",
+    "structural_mutation_surer", "weight_init_type", "species_fitness_func", "elitism",
+    "min_species_size", "compatibility_disjoint_coefficient_nodes", "seed",
+}
+
+
+def _parse(f: dataclasses.Field, raw: str, where: str):
+    text = raw.strip()
+    if f.type in ("bool", bool):
+        lowered = text.lower()
+        if lowered in ("true", "yes", "on", "1"):
+            return True
+        if lowered in ("false", "no", "off", "0"):
+            return False
+        raise ConfigError(f"{where} must be true or false, got {raw!r}")
+    if f.metadata.get("integer"):
+        try:
+            return int(text)
+        except ValueError:
+            raise ConfigError(f"{where} must be an integer, got {raw!r}") from None
+    try:
+        return float(text)
+    except ValueError:
+        raise ConfigError(f"{where} must be a number, got {raw!r}") from None
+
+
+def _describe(lo, hi, lo_open, hi_open) -> str:
+    left = "(" if lo_open or lo is None else "["
+    right = ")" if hi_open or hi is None else "]"
+    return f"{left}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{right}"

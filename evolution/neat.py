@@ -1,0 +1,276 @@
+"""The NEAT driver: ask/tell, ``run``, reporters, checkpoints.
+
+Many independent runs evolve in one batch (``seeds``, one per run). A run that reaches the
+fitness target is frozen: it is neither reproduced nor does it draw random numbers any more,
+so each run's history is exactly what it would be alone.
+
+    neat = NEAT(NEATConfig(num_inputs=2, num_outputs=1), seeds=range(8))
+    neat.add_reporter(StdOutReporter())
+    result = neat.run(fitness_fn, generations=100, fitness_target=3.9)
+
+``fitness_fn(genomes) -> Tensor[R, P]`` must return finite values; higher is better.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+from torch import Tensor
+
+from evolution.checkpoint import (
+    CHECKPOINT_FORMAT,
+    CHECKPOINT_VERSION,
+    CheckpointError,
+    atomic_torch_save,
+    load_checkpoint_dict,
+)
+from evolution.config import ConfigError, NEATConfig
+from evolution.population import Genomes, initial_genomes
+from evolution.reporters import BaseReporter
+from evolution.reproduce import ReproductionInfo, reproduce
+from evolution.rng import RunRNG
+from evolution.speciate import SpeciesState, empty_species, speciate
+
+__all__ = ["NEAT", "NEATResult", "FitnessError"]
+
+FitnessFn = Callable[[Genomes], Tensor]
+
+
+class FitnessError(ValueError):
+    """The fitness function returned a wrong shape, or NaN/inf for some genomes."""
+
+
+@dataclass
+class NEATResult:
+    """Outcome per run. ``solved_generation[r]``: how many generations run ``r`` had
+    evaluated when a genome first reached the target (1 = the initial population), or -1."""
+
+    best_fitness: Tensor  # [R] float64
+    best_genomes: Genomes  # [R, 1]
+    solved_generation: Tensor  # [R] long
+    generations: int
+
+
+class NEAT:
+    """Tensor NEAT over ``R = len(seeds)`` independent runs of ``config.pop_size`` genomes."""
+
+    def __init__(self, config: NEATConfig, *, seeds: Iterable[int] = (0,), device: str | torch.device = "cpu",
+                 dtype: torch.dtype = torch.float32) -> None:
+        if not isinstance(config, NEATConfig):
+            raise ConfigError(f"config must be a NEATConfig, got {type(config).__name__}")
+        self.config = config
+        self.rng = RunRNG([int(s) for s in seeds], device)
+        self.dtype = dtype
+        self.generation = 0
+        self.fitness_target = config.fitness_threshold
+        self.reporters: list[BaseReporter] = []
+        self.genomes = initial_genomes(config, self.rng, dtype=dtype)
+        R = self.num_runs
+        state = empty_species(R, config.num_nodes, 4, device=self.rng.device, dtype=dtype)
+        self.species, self.species_state = speciate(self.genomes, state, config, self.rng, 0)
+        self.best_fitness = torch.full((R,), -torch.inf, dtype=torch.float64, device=self.rng.device)
+        self.best_genomes = self.genomes.gather(torch.zeros(R, 1, dtype=torch.long, device=self.rng.device))
+        self.solved_generation = torch.full((R,), -1, dtype=torch.long, device=self.rng.device)
+
+    # --- basics ------------------------------------------------------------------------
+    @property
+    def num_runs(self) -> int:
+        return len(self.rng)
+
+    @property
+    def device(self) -> torch.device:
+        return self.rng.device
+
+    @property
+    def active_runs(self) -> Tensor:
+        """Runs still evolving (not yet solved), ``[R]`` bool."""
+        return self.solved_generation < 0
+
+    def add_reporter(self, reporter: BaseReporter) -> BaseReporter:
+        self.reporters.append(reporter)
+        return reporter
+
+    def _report(self, hook: str, *args) -> None:
+        for r in self.reporters:
+            getattr(r, hook)(self, *args)
+
+    # --- ask / tell --------------------------------------------------------------------
+    def ask(self) -> Genomes:
+        """The population to evaluate, ``[R, P]``."""
+        return self.genomes
+
+    def tell(self, fitness: Tensor, solved: Tensor | None = None) -> None:
+        """Take the fitness of ``ask()``'s genomes and breed the next generation.
+
+        ``solved[R, P]`` (bool) says which genomes solve the task; by default those with
+        fitness >= ``fitness_target``.
+        """
+        fitness = self._check_fitness(fitness)
+        R = self.num_runs
+        runs = torch.arange(R, device=self.device)
+        active = self.active_runs
+        best_f, best_i = fitness.max(1)
+        better = active & (best_f > self.best_fitness)
+        champions = self.genomes.gather(best_i.unsqueeze(1))
+        self.best_genomes = self.best_genomes.where(better.unsqueeze(1), champions)
+        self.best_fitness = torch.where(better, best_f, self.best_fitness)
+        if solved is None:
+            solved = fitness >= self.fitness_target
+        elif tuple(solved.shape) != tuple(fitness.shape) or solved.dtype != torch.bool:
+            raise FitnessError(f"solved must be a bool tensor of shape {tuple(fitness.shape)}")
+        newly = active & solved.to(self.device).any(1)
+        self.solved_generation = torch.where(newly, self.generation + 1, self.solved_generation)
+        self._report("post_evaluate", fitness)
+        if bool(newly.any()):
+            self._report("found_solution", runs[newly].tolist())
+
+        evolving = runs[self.active_runs].tolist()
+        if evolving:
+            info = self._reproduce(fitness, evolving)
+            self._report("post_reproduction", info)
+        self.generation += 1
+        self._report("end_generation")
+
+    def _check_fitness(self, fitness: Tensor) -> Tensor:
+        R, P = self.num_runs, self.config.pop_size
+        if not isinstance(fitness, Tensor):
+            raise FitnessError(f"fitness must be a tensor of shape [{R}, {P}], got {type(fitness).__name__}")
+        if tuple(fitness.shape) != (R, P):
+            raise FitnessError(f"fitness must have shape [{R}, {P}] (runs, genomes), got {tuple(fitness.shape)}")
+        fitness = fitness.to(device=self.device, dtype=torch.float64)
+        bad = ~torch.isfinite(fitness)
+        if bool(bad.any()):
+            where = torch.nonzero(bad)[:10].tolist()
+            raise FitnessError(f"fitness holds NaN or inf for {int(bad.sum())} genome(s), "
+                               f"first (run, genome) indices: {where}")
+        return fitness
+
+    def _reproduce(self, fitness: Tensor, evolving: list[int]) -> ReproductionInfo:
+        cfg = self.config
+        all_runs = len(evolving) == self.num_runs
+        sub = (slice(None),) if all_runs else (torch.tensor(evolving, device=self.device),)
+        rng = self.rng if all_runs else self.rng.subset(evolving)
+        g = self.genomes if all_runs else self.genomes.select_runs(sub[0])
+        sp = self.species_state if all_runs else self.species_state.select_runs(sub[0])
+        children, _elite, sp, info = reproduce(g, fitness[sub], self.species[sub], sp, cfg, rng, self.generation)
+        if bool(info.extinct.any()):
+            gone = torch.nonzero(info.extinct).flatten().tolist()
+            fresh = initial_genomes(cfg, rng.subset(gone), dtype=self.dtype)
+            idx = torch.tensor(gone, device=self.device)
+            for name, t in children.tensors().items():
+                t[idx] = getattr(fresh, name)
+            sp.alive[idx] = False
+            self._report("complete_extinction", [evolving[i] for i in gone])
+        species, sp = speciate(children, sp, cfg, rng, self.generation + 1)
+        if all_runs:
+            self.genomes, self.species, self.species_state = children, species, sp
+        else:
+            idx = sub[0]
+            for name, t in self.genomes.tensors().items():
+                t[idx] = getattr(children, name)
+            self.species[idx] = species
+            full = self.species_state
+            if sp.capacity > full.capacity:
+                full = full.grow(sp.capacity)
+            elif sp.capacity < full.capacity:
+                sp = sp.grow(full.capacity)
+            for name, t in full.tensors().items():
+                t[idx] = getattr(sp, name)
+            self.species_state = full
+        return info
+
+    # --- run ---------------------------------------------------------------------------
+    def run(self, fitness_fn: FitnessFn, generations: int, fitness_target: float | None = None,
+            solved_fn: Callable[[Genomes, Tensor], Tensor] | None = None) -> NEATResult:
+        """Evaluate and breed for up to ``generations`` generations, or until every run has
+        solved the task: a genome with fitness >= ``fitness_target`` (default:
+        ``config.fitness_threshold``), or, if given, ``solved_fn(genomes, fitness) -> [R, P]`` bool."""
+        if isinstance(generations, bool) or not isinstance(generations, int) or generations < 0:
+            raise ValueError(f"generations must be a non-negative int, got {generations!r}")
+        if fitness_target is not None:
+            self.fitness_target = float(fitness_target)
+        for _ in range(generations):
+            if not bool(self.active_runs.any()):
+                break
+            self._report("start_generation")
+            genomes = self.ask()
+            fitness = fitness_fn(genomes)
+            self.tell(fitness, None if solved_fn is None else solved_fn(genomes, self._check_fitness(fitness)))
+        self._report("end_run")
+        return self.result()
+
+    def result(self) -> NEATResult:
+        return NEATResult(self.best_fitness.clone(), self.best_genomes.clone(), self.solved_generation.clone(),
+                          self.generation)
+
+    # --- checkpoints -------------------------------------------------------------------
+    def state_dict(self) -> dict:
+        return {
+            "format": CHECKPOINT_FORMAT,
+            "version": CHECKPOINT_VERSION,
+            "config": self.config.to_dict(),
+            "seeds": list(self.rng.seeds),
+            "dtype": str(self.dtype).removeprefix("torch."),
+            "device": self.device.type,
+            "generation": self.generation,
+            "fitness_target": self.fitness_target,
+            "genomes": {k: v.cpu() for k, v in self.genomes.tensors().items()},
+            "species": self.species.cpu(),
+            "species_state": {k: v.cpu() for k, v in self.species_state.tensors().items()},
+            "rng": self.rng.get_state(),
+            "best_fitness": self.best_fitness.cpu(),
+            "best_genomes": {k: v.cpu() for k, v in self.best_genomes.tensors().items()},
+            "solved_generation": self.solved_generation.cpu(),
+        }
+
+    def save_checkpoint(self, path: str | os.PathLike) -> Path:
+        """Write the whole state (RNG included) atomically; ``NEAT.restore`` continues bit for bit."""
+        return atomic_torch_save(self.state_dict(), path)
+
+    @classmethod
+    def restore(cls, path: str | os.PathLike, *, device: str | torch.device | None = None) -> NEAT:
+        """Load a checkpoint. Raises ``CheckpointError`` naming the file if it is damaged."""
+        data = load_checkpoint_dict(path, map_location="cpu")
+        name = os.fspath(path)
+        try:
+            config = NEATConfig(**data["config"])
+            dtype = getattr(torch, data["dtype"])
+            saved = torch.device(data["device"])
+            target = torch.device(device) if device is not None else saved
+            if target.type != saved.type:
+                raise CheckpointError(f"checkpoint {name!r} was written on {saved.type}; its random streams only "
+                                      f"continue bit for bit there, so restore it on {saved.type}, not {target.type}")
+            self = cls.__new__(cls)
+            self.config = config
+            self.dtype = dtype
+            self.rng = RunRNG(data["seeds"], target)
+            self.generation = int(data["generation"])
+            self.fitness_target = float(data["fitness_target"])
+            self.reporters = []
+            self.genomes = Genomes(**{k: v.to(target) for k, v in data["genomes"].items()})
+            self.species = data["species"].to(target)
+            self.species_state = SpeciesState(**{k: v.to(target) for k, v in data["species_state"].items()})
+            self.best_fitness = data["best_fitness"].to(target)
+            self.best_genomes = Genomes(**{k: v.to(target) for k, v in data["best_genomes"].items()})
+            self.solved_generation = data["solved_generation"].to(target)
+            self.rng.set_state(data["rng"])
+        except CheckpointError:
+            raise
+        except (KeyError, TypeError, ValueError, AttributeError, RuntimeError) as exc:
+            raise CheckpointError(f"checkpoint {name!r} is malformed ({type(exc).__name__}: {exc})") from exc
+        R, P, N = self.num_runs, config.pop_size, config.num_nodes
+        if tuple(self.genomes.weight.shape) != (R, P, N, N) or tuple(self.species.shape) != (R, P):
+            raise CheckpointError(f"checkpoint {name!r} is malformed: tensor shapes do not match its config")
+        return self
+
+    def replace_config(self, **changes) -> None:
+        """Change knobs that do not alter tensor shapes (rates, thresholds) mid-run."""
+        fixed = {"num_inputs", "num_outputs", "num_bias", "max_hidden", "pop_size"}
+        if fixed & changes.keys():
+            raise ConfigError(f"cannot change {sorted(fixed & changes.keys())} of a running population")
+        self.config = dataclasses.replace(self.config, **changes)

@@ -1,0 +1,171 @@
+"""The population as tensors, and its invariants.
+
+``R`` independent runs of ``P`` genomes over a shared node index of capacity ``N``:
+
+- ``weight[R, P, N, N]`` float: connection (i, j) from node i to node j; exactly 0 where no gene.
+- ``conn[R, P, N, N]`` bool: the gene exists. ``enabled[R, P, N, N]`` bool: it is expressed.
+- ``node[R, P, N]`` bool: node present. Slots ``[0, num_inputs)`` are inputs, then
+  ``num_bias`` bias nodes, then outputs, then hidden slots. Inputs, bias and outputs are
+  always present.
+- ``sigma[R, P]`` float: Qiu et al.'s evolved decoder gain (positive).
+
+Slot ``i`` is node ``i``'s historical marking; slot ``(i, j)`` is the connection's. So the
+same gene sits at the same place in every genome of a run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import torch
+from torch import Tensor
+
+from evolution.config import NEATConfig
+from evolution.rng import RunRNG
+
+__all__ = ["Genomes", "initial_genomes", "check_invariants", "InvariantError", "reachability"]
+
+
+class InvariantError(AssertionError):
+    """A population tensor broke one of the invariants above."""
+
+
+@dataclass
+class Genomes:
+    """Genome tensors with leading ``[R, P]`` axes (see the module docstring)."""
+
+    weight: Tensor
+    conn: Tensor
+    enabled: Tensor
+    node: Tensor
+    sigma: Tensor
+
+    @property
+    def num_runs(self) -> int:
+        return self.weight.shape[0]
+
+    @property
+    def pop_size(self) -> int:
+        return self.weight.shape[1]
+
+    @property
+    def num_nodes(self) -> int:
+        return self.weight.shape[-1]
+
+    @property
+    def device(self) -> torch.device:
+        return self.weight.device
+
+    def tensors(self) -> dict[str, Tensor]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def gather(self, index: Tensor) -> Genomes:
+        """Genomes picked per run: ``index[R, K]`` -> a ``[R, K]`` population."""
+        out = {}
+        for name, t in self.tensors().items():
+            idx = index.view(*index.shape, *([1] * (t.dim() - 2))).expand(*index.shape, *t.shape[2:])
+            out[name] = torch.gather(t, 1, idx)
+        return Genomes(**out)
+
+    def where(self, take_other: Tensor, other: Genomes) -> Genomes:
+        """Per genome, ``other``'s genome where ``take_other[R, P]`` is True, else this one's."""
+        out = {}
+        for name, t in self.tensors().items():
+            mask = take_other.view(*take_other.shape, *([1] * (t.dim() - 2)))
+            out[name] = torch.where(mask, getattr(other, name), t)
+        return Genomes(**out)
+
+    def select_runs(self, runs: Tensor | list[int]) -> Genomes:
+        return Genomes(**{k: v[runs] for k, v in self.tensors().items()})
+
+    def clone(self) -> Genomes:
+        return Genomes(**{k: v.clone() for k, v in self.tensors().items()})
+
+    def to(self, device: torch.device | str) -> Genomes:
+        return Genomes(**{k: v.to(device) for k, v in self.tensors().items()})
+
+    def effective_weight(self) -> Tensor:
+        """Expressed weights ``[R, P, N, N]``: the weight where the gene is enabled, else 0."""
+        return torch.where(self.enabled, self.weight, torch.zeros((), dtype=self.weight.dtype,
+                                                                   device=self.weight.device))
+
+    def num_genes(self) -> Tensor:
+        """Connection genes per genome (enabled or not), ``[R, P]``."""
+        return self.conn.flatten(2).sum(-1)
+
+    def num_hidden(self, config: NEATConfig) -> Tensor:
+        """Hidden nodes per genome, ``[R, P]``."""
+        return self.node[..., config.first_hidden:].sum(-1)
+
+
+def _fixed_nodes(config: NEATConfig, device: torch.device) -> Tensor:
+    fixed = torch.zeros(config.num_nodes, dtype=torch.bool, device=device)
+    fixed[: config.first_hidden] = True
+    return fixed
+
+
+def initial_genomes(config: NEATConfig, rng: RunRNG, *, dtype: torch.dtype = torch.float32) -> Genomes:
+    """The start population: every input (and bias) wired to every output, random weights.
+
+    With ``config.initial_self_loops`` each output also gets a self-connection
+    (neat-python's "full" start for recurrent networks). No hidden nodes.
+    """
+    R, P, N = len(rng), config.pop_size, config.num_nodes
+    device = rng.device
+    template = torch.zeros(N, N, dtype=torch.bool, device=device)
+    template[: config.first_output, config.first_output:config.first_hidden] = True
+    if config.initial_self_loops:
+        outs = torch.arange(config.first_output, config.first_hidden, device=device)
+        template[outs, outs] = True
+    conn = template.expand(R, P, N, N).clone()
+    weight = config.weight_init_mean + config.weight_init_stdev * rng.randn(P, N, N, dtype=dtype)
+    weight = torch.where(conn, weight.clamp(config.weight_min_value, config.weight_max_value), 0.0)
+    node = _fixed_nodes(config, device).expand(R, P, N).clone()
+    sigma = config.sigma_init_mean + config.sigma_init_stdev * rng.randn(P, dtype=dtype)
+    sigma = sigma.clamp(config.sigma_min_value, config.sigma_max_value)
+    return Genomes(weight=weight, conn=conn, enabled=conn.clone(), node=node, sigma=sigma)
+
+
+def reachability(conn: Tensor) -> Tensor:
+    """Transitive closure: ``reach[..., i, j]`` is True iff a path of genes leads i -> j.
+
+    Repeated squaring of the boolean adjacency: log2(N) batched matmuls.
+    """
+    n = conn.shape[-1]
+    reach = conn.to(torch.float32)
+    steps = max(1, (n - 1).bit_length())
+    for _ in range(steps):
+        reach = ((reach + reach @ reach) > 0).to(torch.float32)
+    return reach > 0
+
+
+def check_invariants(genomes: Genomes, config: NEATConfig) -> None:
+    """Raise ``InvariantError`` naming the first broken invariant, else return None."""
+    g = genomes
+    N = config.num_nodes
+    shapes = {"weight": (N, N), "conn": (N, N), "enabled": (N, N), "node": (N,), "sigma": ()}
+    for name, tail in shapes.items():
+        t = getattr(g, name)
+        if tuple(t.shape[2:]) != tail or t.shape[:2] != g.weight.shape[:2]:
+            raise InvariantError(f"{name} has shape {tuple(t.shape)}, expected [R, P, *{tail}]")
+    if g.pop_size != config.pop_size:
+        raise InvariantError(f"population has {g.pop_size} genomes, config says {config.pop_size}")
+    if not bool(g.node[..., : config.first_hidden].all()):
+        raise InvariantError("an input, bias or output node is missing")
+    if not bool((g.conn <= (g.node.unsqueeze(-1) & g.node.unsqueeze(-2))).all()):
+        raise InvariantError("a connection gene refers to a missing node")
+    if not bool((g.enabled <= g.conn).all()):
+        raise InvariantError("a gene is enabled but does not exist")
+    if not bool(torch.isfinite(g.weight).all()) or not bool(torch.isfinite(g.sigma).all()):
+        raise InvariantError("a weight or sigma is NaN or inf")
+    if bool((g.weight[~g.conn] != 0).any()):
+        raise InvariantError("a weight is non-zero where no gene exists")
+    if bool(((g.weight < config.weight_min_value) | (g.weight > config.weight_max_value)).any()):
+        raise InvariantError("a weight lies outside [weight_min_value, weight_max_value]")
+    if bool(((g.sigma < config.sigma_min_value) | (g.sigma > config.sigma_max_value)).any()):
+        raise InvariantError("a sigma lies outside [sigma_min_value, sigma_max_value]")
+    into_inputs = g.conn[..., : config.first_output]
+    if bool(into_inputs.any()):
+        raise InvariantError("a connection leads into an input or bias node")
+    if config.feed_forward and bool(torch.diagonal(reachability(g.conn), dim1=-2, dim2=-1).any()):
+        raise InvariantError("a feed-forward genome has a cycle")

