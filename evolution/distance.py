@@ -6,53 +6,85 @@ E, D: excess and disjoint genes; W: mean absolute weight difference of matching 
 N: genes in the larger genome, or 1 when both have fewer than
 ``compatibility_normalize_min_genes`` ([NEAT02]). Slots carry no creation order, so a gene
 is *excess* when its flat slot index ``i * N + j`` lies beyond the other genome's highest.
-Counts come from one batched matmul; W loops over representatives (a fixed small number).
+
+Everything reduces to batched matmuls and one L1 ``cdist``: matching counts are
+``A @ B^T`` over 0/1 gene vectors, and the weight term uses
+``sum_{A and B} |wa - wb| = L1(wa, wb) - sum_{A not B} |wa| - sum_{B not A} |wb|`` (weights
+are exactly 0 where a genome has no gene). Per-genome statistics are computed once
+(``gene_stats``) and reused against every set of representatives.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import torch
 from torch import Tensor
 
 from evolution.config import NEATConfig
 
-__all__ = ["distance_matrix"]
+__all__ = ["GeneStats", "gene_stats", "distance", "distance_matrix"]
 
 
-def _highest_slot(conn_flat: Tensor) -> Tensor:
-    G = conn_flat.shape[-1]
-    idx = torch.arange(G, device=conn_flat.device)
-    return torch.where(conn_flat, idx, -1).amax(-1)
+@dataclass
+class GeneStats:
+    """Per-genome gene vectors and summaries, ``[R, K, ...]``, float64."""
+
+    has: Tensor  # [R, K, G] 1.0 where the gene exists
+    w: Tensor  # [R, K, G] weight (0 where no gene)
+    absw: Tensor  # [R, K, G]
+    count: Tensor  # [R, K] genes
+    abs_sum: Tensor  # [R, K] sum |w|
+    top: Tensor  # [R, K] highest occupied flat slot (-1: none)
+    prefix: Tensor  # [R, K, G + 1] genes at flat slots < g
+    sigma: Tensor  # [R, K]
+
+    def take(self, index: Tensor) -> GeneStats:
+        """Rows ``index[R, K']`` of each run."""
+        out = {}
+        for name in self.__dataclass_fields__:
+            t = getattr(self, name)
+            idx = index.view(*index.shape, *([1] * (t.dim() - 2))).expand(*index.shape, *t.shape[2:])
+            out[name] = torch.gather(t, 1, idx)
+        return GeneStats(**out)
 
 
-def distance_matrix(
-    conn: Tensor, weight: Tensor, sigma: Tensor,
-    rep_conn: Tensor, rep_weight: Tensor, rep_sigma: Tensor, cfg: NEATConfig,
-) -> Tensor:
-    """Distances ``[R, P, S]`` from genomes ``[R, P, N, N]`` to representatives ``[R, S, N, N]``."""
-    a = conn.flatten(2)
-    b = rep_conn.flatten(2)
-    wa = weight.flatten(2)
-    wb = rep_weight.flatten(2)
-    fa, fb = a.to(weight.dtype), b.to(weight.dtype)
-    n_a = fa.sum(-1)  # [R, P]
-    n_b = fb.sum(-1)  # [R, S]
-    matching = fa @ fb.transpose(1, 2)  # [R, P, S]
-    # Genes of a at or below b's highest slot (and vice versa), via prefix counts.
-    top_a, top_b = _highest_slot(a), _highest_slot(b)
-    cum_a = torch.cat([torch.zeros_like(fa[..., :1]), fa.cumsum(-1)], -1)  # [R, P, G + 1]
-    cum_b = torch.cat([torch.zeros_like(fb[..., :1]), fb.cumsum(-1)], -1)
-    S = b.shape[1]
-    a_below_b = torch.gather(cum_a, 2, (top_b + 1).unsqueeze(1).expand(-1, a.shape[1], S))
-    b_below_a = torch.gather(cum_b, 2, (top_a + 1).unsqueeze(1).expand(-1, S, a.shape[1])).transpose(1, 2)
-    excess = (n_a.unsqueeze(-1) - a_below_b) + (n_b.unsqueeze(1) - b_below_a)
-    disjoint = n_a.unsqueeze(-1) + n_b.unsqueeze(1) - 2 * matching - excess
-    weight_diff = torch.stack(
-        [((wa - wb[:, s : s + 1]).abs() * (a & b[:, s : s + 1])).sum(-1) for s in range(S)], -1)
-    w_mean = torch.where(matching > 0, weight_diff / matching.clamp_min(1), torch.zeros_like(weight_diff))
-    n_max = torch.maximum(n_a.unsqueeze(-1), n_b.unsqueeze(1))
-    norm = torch.where(n_max >= cfg.compatibility_normalize_min_genes, n_max, torch.ones_like(n_max))
+def gene_stats(conn: Tensor, weight: Tensor, sigma: Tensor) -> GeneStats:
+    """Statistics of genomes ``conn/weight [R, K, N, N]``, ``sigma [R, K]``."""
+    has = conn.flatten(2).to(torch.float64)
+    w = torch.where(conn, weight, 0.0).flatten(2).to(torch.float64)
+    absw = w.abs()
+    G = has.shape[-1]
+    idx = torch.arange(G, device=has.device)
+    top = torch.where(has > 0, idx, -1).amax(-1)
+    prefix = torch.cat([torch.zeros_like(has[..., :1]), has.cumsum(-1)], -1)
+    return GeneStats(has, w, absw, has.sum(-1), absw.sum(-1), top, prefix, sigma.to(torch.float64))
+
+
+def distance(a: GeneStats, b: GeneStats, cfg: NEATConfig) -> Tensor:
+    """Distances ``[R, Ka, Kb]`` between every genome of ``a`` and every genome of ``b``."""
+    Ka, Kb = a.count.shape[1], b.count.shape[1]
+    bt = lambda t: t.transpose(1, 2)  # noqa: E731
+    matching = a.has @ bt(b.has)
+    a_upto_top_b = torch.gather(a.prefix, 2, (b.top + 1).unsqueeze(1).expand(-1, Ka, Kb))
+    b_upto_top_a = bt(torch.gather(b.prefix, 2, (a.top + 1).unsqueeze(1).expand(-1, Kb, Ka)))
+    n_a, n_b = a.count.unsqueeze(-1), b.count.unsqueeze(1)
+    excess = (n_a - a_upto_top_b) + (n_b - b_upto_top_a)
+    disjoint = n_a + n_b - 2 * matching - excess
+    l1 = torch.cdist(a.w, b.w, p=1)
+    a_only = a.abs_sum.unsqueeze(-1) - a.absw @ bt(b.has)
+    b_only = b.abs_sum.unsqueeze(1) - a.has @ bt(b.absw)
+    weight_diff = (l1 - a_only - b_only).clamp_min(0.0)
+    w_mean = torch.where(matching > 0, weight_diff / matching.clamp_min(1), 0.0)
+    n_max = torch.maximum(n_a, n_b)
+    norm = torch.where(n_max >= cfg.compatibility_normalize_min_genes, n_max, 1.0)
     return (cfg.compatibility_excess_coefficient * excess / norm
             + cfg.compatibility_disjoint_coefficient * disjoint / norm
             + cfg.compatibility_weight_coefficient * w_mean
-            + cfg.compatibility_sigma_coefficient * (sigma.unsqueeze(-1) - rep_sigma.unsqueeze(1)).abs())
+            + cfg.compatibility_sigma_coefficient * (a.sigma.unsqueeze(-1) - b.sigma.unsqueeze(1)).abs())
+
+
+def distance_matrix(conn: Tensor, weight: Tensor, sigma: Tensor, rep_conn: Tensor, rep_weight: Tensor,
+                    rep_sigma: Tensor, cfg: NEATConfig) -> Tensor:
+    """Distances ``[R, P, S]`` from genomes ``[R, P, N, N]`` to representatives ``[R, S, N, N]``."""
+    return distance(gene_stats(conn, weight, sigma), gene_stats(rep_conn, rep_weight, rep_sigma), cfg)

@@ -114,16 +114,19 @@ class NEAT:
         R = self.num_runs
         runs = torch.arange(R, device=self.device)
         active = self.active_runs
-        best_f, best_i = fitness.max(1)
-        better = active & (best_f > self.best_fitness)
-        champions = self.genomes.gather(best_i.unsqueeze(1))
-        self.best_genomes = self.best_genomes.where(better.unsqueeze(1), champions)
-        self.best_fitness = torch.where(better, best_f, self.best_fitness)
         if solved is None:
             solved = fitness >= self.fitness_target
         elif tuple(solved.shape) != tuple(fitness.shape) or solved.dtype != torch.bool:
             raise FitnessError(f"solved must be a bool tensor of shape {tuple(fitness.shape)}")
-        newly = active & solved.to(self.device).any(1)
+        solved = solved.to(self.device)
+        newly = active & solved.any(1)
+        # The run's champion: the fittest genome, or for a run that just solved, the
+        # fittest genome among those that solve.
+        best_f, best_i = torch.where(newly.unsqueeze(1) & ~solved, -torch.inf, fitness).max(1)
+        better = active & ((best_f > self.best_fitness) | newly)
+        champions = self.genomes.gather(best_i.unsqueeze(1))
+        self.best_genomes = self.best_genomes.where(better.unsqueeze(1), champions)
+        self.best_fitness = torch.where(better, best_f, self.best_fitness)
         self.solved_generation = torch.where(newly, self.generation + 1, self.solved_generation)
         self._report("post_evaluate", fitness)
         if bool(newly.any()):

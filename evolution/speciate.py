@@ -15,7 +15,7 @@ import torch
 from torch import Tensor
 
 from evolution.config import NEATConfig
-from evolution.distance import distance_matrix
+from evolution.distance import distance, gene_stats
 from evolution.population import Genomes
 from evolution.rng import RunRNG
 
@@ -96,8 +96,9 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
     runs = torch.arange(R, device=dev)
     sp = SpeciesState(**{k: v.clone() for k, v in sp.tensors().items()})  # pure: never edit the input
     species = torch.full((R, P), -1, dtype=torch.long, device=dev)
+    stats = gene_stats(g.conn, g.weight, g.sigma)
     if bool(sp.alive.any()):
-        d = distance_matrix(g.conn, g.weight, g.sigma, sp.rep_conn, sp.rep_weight, sp.rep_sigma, cfg)
+        d = distance(stats, gene_stats(sp.rep_conn, sp.rep_weight, sp.rep_sigma), cfg)
         d = torch.where(sp.alive.unsqueeze(1), d, torch.full_like(d, torch.inf))
         best_d, best_s = d.min(-1)
         species = torch.where(best_d < thr, best_s, species)
@@ -116,7 +117,7 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
             alive_before = torch.cat([alive_before, torch.zeros_like(alive_before)], 1)
             continue
         f = g.gather(founder.unsqueeze(1))
-        d_new = distance_matrix(g.conn, g.weight, g.sigma, f.conn, f.weight, f.sigma, cfg)[..., 0]
+        d_new = distance(stats, stats.take(founder.unsqueeze(1)), cfg)[..., 0]
         join = has.unsqueeze(1) & (species < 0) & (d_new < thr)
         join[runs, founder] |= has  # the founder always joins its own species
         species = torch.where(join, slot.unsqueeze(1), species)

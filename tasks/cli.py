@@ -28,6 +28,40 @@ def _cmd_figures(args: argparse.Namespace) -> int:
     return 0
 
 
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}")
+    return value
+
+
+def _cmd_xor(args: argparse.Namespace) -> int:
+    from tasks.experiments.xor import run_xor, write_xor_report
+
+    seeds = list(range(args.seed, args.seed + args.runs))
+    summary = run_xor(seeds, generations=args.generations, device=args.device)
+    for path in write_xor_report(summary, args.out):
+        print(f"wrote {path}")
+    t = summary.table()
+    print(f"{t['runs']} runs (seeds {seeds[0]}..{seeds[-1]}): {t['failures']} failures, mean "
+          f"{t['mean_generations']:.2f} generations, median {t['median_generations']}, mean hidden nodes "
+          f"{t['mean_hidden_nodes']:.2f}; {t['wall_s']:.1f} s")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="snn-neat", description="Evolving spiking neural networks in PyTorch.")
@@ -40,6 +74,17 @@ def build_parser() -> argparse.ArgumentParser:
     fig.add_argument("--dt-ms", type=_positive_float, default=0.02,
                      help="integration step in ms (default: 0.02)")
     fig.set_defaults(func=_cmd_figures)
+
+    xor = sub.add_parser(
+        "xor", help="NEAT sanity check: evolve XOR over many seeded runs (Stanley & Miikkulainen 2002)",
+        description="Evolve XOR with sigmoid tensor NEAT, one run per seed (seeds SEED..SEED+RUNS-1), all "
+                    "runs in one batch; write runs.csv, summary.json and summary.md.")
+    xor.add_argument("--runs", type=_positive_int, default=100, help="number of runs (default: 100)")
+    xor.add_argument("--seed", type=_non_negative_int, default=0, help="first seed (default: 0)")
+    xor.add_argument("--generations", type=_positive_int, default=100, help="budget per run (default: 100)")
+    xor.add_argument("--device", default="cpu", help="torch device (default: cpu)")
+    xor.add_argument("--out", default="results/xor", help="output folder (default: results/xor)")
+    xor.set_defaults(func=_cmd_xor)
     return parser
 
 

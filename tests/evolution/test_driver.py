@@ -55,17 +55,21 @@ def test_run_in_a_batch_equals_the_run_alone_bitwise():
 
 
 def test_solved_runs_freeze_and_match_running_alone():
-    # XOR with a low target: runs solve at different generations and then stop evolving.
-    seeds = [1, 2, 3, 4]
+    # XOR: runs solve at different generations, then stop evolving; the others go on.
+    from tasks.xor import xor_solved
+
+    seeds = [1, 2, 3, 4, 5, 6]
+    solved_fn = lambda g, f: xor_solved(g)  # noqa: E731
     batch = NEAT(XOR_CONFIG, seeds=seeds)
-    res = batch.run(xor_fitness, 30, fitness_target=8.9)
-    assert (res.solved_generation > 0).all() and len(set(res.solved_generation.tolist())) > 1
-    for r in (0, 2):
+    res = batch.run(xor_fitness, 40, solved_fn=solved_fn)
+    solved = [s for s in res.solved_generation.tolist() if s > 0]
+    assert len(set(solved)) >= 2, res.solved_generation  # the test needs staggered solutions
+    for r in range(len(seeds)):
         alone = NEAT(XOR_CONFIG, seeds=[seeds[r]])
-        res_alone = alone.run(xor_fitness, 30, fitness_target=8.9)
+        res_alone = alone.run(xor_fitness, 40, solved_fn=solved_fn)
         assert res_alone.solved_generation.item() == res.solved_generation[r].item()
         assert torch.equal(res_alone.best_genomes.weight[0], res.best_genomes.weight[r])
-        assert res.best_fitness[r] >= 8.9
+        assert torch.equal(alone.genomes.weight[0], batch.genomes.weight[r])
 
 
 def test_checkpoint_resume_in_a_fresh_process_is_bit_identical(tmp_path):
@@ -149,7 +153,9 @@ def test_statistics_reporter_and_csv(tmp_path):
     neat.run(fitness_fn, 4)
     assert len(stats.rows) == 8
     best = stats.best_fitness()
-    assert best.shape == (4, 2) and bool((best[1:] >= best[:-1] - 1e-9).all() or True)
+    assert best.shape == (4, 2)
+    first = fitness_fn(NEAT(CFG, seeds=[1, 2]).genomes).amax(1)
+    assert torch.equal(best[0], first)  # generation 0's best per run
     path = stats.save_csv(tmp_path / "stats.csv")
     lines = path.read_text().splitlines()
     assert lines[0].startswith("generation,run,best_fitness") and len(lines) == 9

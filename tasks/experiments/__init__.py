@@ -1,0 +1,1 @@
+"""Reproducible experiments: seeded batches of runs that write tables and figures."""

@@ -1,0 +1,94 @@
+"""XOR sanity check for tensor NEAT, as Stanley & Miikkulainen (2002) report it.
+
+All runs evolve in one batch, each with its own recorded seed. A run is solved at the first
+generation where some genome classifies all four patterns (outputs on the right side of
+0.5); failures (none within the budget) count as ``generations + 1`` in the mean and median.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import statistics
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from evolution.checkpoint import atomic_write_bytes
+from evolution.config import NEATConfig
+from evolution.neat import NEAT
+from evolution.reporters import TqdmReporter
+from tasks.xor import XOR_CONFIG, xor_fitness, xor_solved
+
+__all__ = ["XorSummary", "run_xor", "write_xor_report"]
+
+NEAT02 = {"mean_generations": 32, "failures": "0/100", "mean_hidden": 2.35}
+
+
+@dataclass
+class XorSummary:
+    seeds: list[int]
+    solved_generation: list[int]  # -1: not solved
+    hidden_nodes: list[int]  # of the solving genome (-1: not solved)
+    generations: int
+    wall_s: float
+
+    @property
+    def failures(self) -> int:
+        return sum(g < 0 for g in self.solved_generation)
+
+    def counted(self) -> list[int]:
+        return [g if g >= 0 else self.generations + 1 for g in self.solved_generation]
+
+    def table(self) -> dict:
+        counted = self.counted()
+        solved_hidden = [h for h in self.hidden_nodes if h >= 0]
+        return {
+            "runs": len(self.seeds),
+            "failures": self.failures,
+            "mean_generations": statistics.mean(counted),
+            "median_generations": statistics.median(counted),
+            "best": min(counted),
+            "worst": max(counted),
+            "mean_hidden_nodes": statistics.mean(solved_hidden) if solved_hidden else float("nan"),
+            "wall_s": self.wall_s,
+        }
+
+
+def run_xor(seeds: list[int], *, generations: int = 100, config: NEATConfig = XOR_CONFIG,
+            device: str = "cpu", progress: bool = True) -> XorSummary:
+    """Evolve XOR once per seed, all runs in one batch."""
+    start = time.perf_counter()
+    neat = NEAT(config, seeds=seeds, device=device)
+    if progress:
+        neat.add_reporter(TqdmReporter(total=generations))
+    result = neat.run(lambda g: xor_fitness(g, config), generations,
+                      solved_fn=lambda g, f: xor_solved(g, config))
+    hidden = result.best_genomes.num_hidden(config)[:, 0]
+    solved = result.solved_generation
+    return XorSummary(
+        seeds=list(seeds), solved_generation=solved.tolist(),
+        hidden_nodes=torch.where(solved >= 0, hidden, -1).tolist(),
+        generations=generations, wall_s=time.perf_counter() - start,
+    )
+
+
+def write_xor_report(summary: XorSummary, out: str | Path) -> list[Path]:
+    """Write ``runs.csv`` (one row per seed), ``summary.json`` and ``summary.md``."""
+    out = Path(out)
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["seed", "solved_generation", "hidden_nodes"])
+    w.writerows(zip(summary.seeds, summary.solved_generation, summary.hidden_nodes, strict=True))
+    t = summary.table()
+    md = ("| | runs | failures | mean gens | median gens | best | worst | mean hidden nodes |\n"
+          "|---|---|---|---|---|---|---|---|\n"
+          f"| snn-neat | {t['runs']} | {t['failures']} | {t['mean_generations']:.2f} | {t['median_generations']:.1f} "
+          f"| {t['best']} | {t['worst']} | {t['mean_hidden_nodes']:.2f} |\n"
+          f"| NEAT (2002) | 100 | 0 | 32 | - | - | - | 2.35 |\n")
+    return [atomic_write_bytes(out / "runs.csv", buf.getvalue().encode()),
+            atomic_write_bytes(out / "summary.json", json.dumps(t, indent=1).encode()),
+            atomic_write_bytes(out / "summary.md", md.encode())]
