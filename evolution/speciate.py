@@ -80,6 +80,21 @@ def empty_species(R: int, N: int, capacity: int, *, device: torch.device, dtype:
     )
 
 
+FOUNDER_BATCH = 8
+
+
+def _free_slot(species: Tensor, sp: SpeciesState, need: Tensor) -> tuple[Tensor, SpeciesState]:
+    """The lowest species slot per run holding no species with members this generation
+    and not founded this generation; grows the slots when a run in ``need`` has none."""
+    while True:
+        taken = torch.zeros_like(sp.alive)
+        taken.scatter_(1, species.clamp_min(0), species >= 0)
+        slot, has_slot = _first_true(~taken)
+        if not bool((need & ~has_slot).any()):
+            return slot, sp
+        sp = sp.grow(2 * sp.capacity)
+
+
 def _first_true(mask: Tensor) -> tuple[Tensor, Tensor]:
     """Index of the first True along the last dim, and whether there is one."""
     n = mask.shape[-1]
@@ -102,37 +117,36 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
         d = torch.where(sp.alive.unsqueeze(1), d, torch.full_like(d, torch.inf))
         best_d, best_s = d.min(-1)
         species = torch.where(best_d < thr, best_s, species)
-    alive_before = sp.alive.clone()
-    # Found new species, one per run per pass, from the first unassigned genome.
+    # Genomes compatible with no species found new ones, in genome order as in [NEAT02]:
+    # the first unassigned genome founds a species, every unassigned genome within the
+    # threshold of it joins, and so on. Distances to the next FOUNDER_BATCH candidates are
+    # computed in one call; the sequential rule is then resolved candidate by candidate.
+    k_max = min(FOUNDER_BATCH, P)
+    positions = torch.arange(P, device=dev)
     while True:
-        founder, has = _first_true(species < 0)
-        if not bool(has.any()):
+        unassigned = species < 0
+        if not bool(unassigned.any()):
             break
-        members_alive = torch.zeros_like(sp.alive)
-        members_alive.scatter_(1, species.clamp_min(0), species >= 0)
-        in_use = (sp.alive & ~alive_before) | members_alive  # slots taken this generation
-        slot, has_slot = _first_true(~in_use)
-        if bool((has & ~has_slot).any()):
-            sp = sp.grow(2 * sp.capacity)
-            alive_before = torch.cat([alive_before, torch.zeros_like(alive_before)], 1)
-            continue
-        f = g.gather(founder.unsqueeze(1))
-        d_new = distance(stats, stats.take(founder.unsqueeze(1)), cfg)[..., 0]
-        join = has.unsqueeze(1) & (species < 0) & (d_new < thr)
-        join[runs, founder] |= has  # the founder always joins its own species
-        species = torch.where(join, slot.unsqueeze(1), species)
-        # Mark the slot: a living species with the founder as provisional representative.
-        s_idx = (runs, slot)
-        sp.alive[s_idx] = sp.alive[s_idx] | has
-        sp.rep_conn[s_idx] = torch.where(has.view(R, 1, 1), f.conn[:, 0], sp.rep_conn[s_idx])
-        sp.rep_weight[s_idx] = torch.where(has.view(R, 1, 1), f.weight[:, 0], sp.rep_weight[s_idx])
-        sp.rep_sigma[s_idx] = torch.where(has, f.sigma[:, 0], sp.rep_sigma[s_idx])
-        new_here = has & ~alive_before[s_idx]
-        sp.best_fitness[s_idx] = torch.where(new_here, -torch.inf, sp.best_fitness[s_idx])
-        sp.last_improved[s_idx] = torch.where(new_here, generation, sp.last_improved[s_idx])
-        sp.created[s_idx] = torch.where(new_here, generation, sp.created[s_idx])
-        sp.ident[s_idx] = torch.where(new_here, sp.next_id, sp.ident[s_idx])
-        sp.next_id = sp.next_id + new_here.long()
+        key = torch.where(unassigned, positions, P + positions)
+        cand = torch.topk(key, k_max, dim=1, largest=False).values  # first k unassigned (>= P: none)
+        valid, cand = cand < P, cand % P
+        d_cand = distance(stats, stats.take(cand), cfg)  # [R, P, k]
+        for k in range(k_max):
+            founder = cand[:, k]
+            has = valid[:, k] & (species[runs, founder] < 0)
+            if not bool(has.any()):
+                continue
+            slot, sp = _free_slot(species, sp, has)
+            join = has.unsqueeze(1) & (species < 0) & (d_cand[..., k] < thr)
+            join[runs, founder] |= has  # the founder always joins its own species
+            species = torch.where(join, slot.unsqueeze(1), species)
+            s_idx = (runs, slot)
+            sp.alive[s_idx] = sp.alive[s_idx] | has
+            sp.best_fitness[s_idx] = torch.where(has, -torch.inf, sp.best_fitness[s_idx])
+            sp.last_improved[s_idx] = torch.where(has, generation, sp.last_improved[s_idx])
+            sp.created[s_idx] = torch.where(has, generation, sp.created[s_idx])
+            sp.ident[s_idx] = torch.where(has, sp.next_id, sp.ident[s_idx])
+            sp.next_id = sp.next_id + has.long()
     # Species without members die; each survivor takes a random member as representative.
     counts = torch.zeros(R, sp.capacity, dtype=torch.long, device=dev)
     counts.scatter_add_(1, species, torch.ones_like(species))

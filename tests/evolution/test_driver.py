@@ -172,3 +172,29 @@ def test_statistics_reporter_and_csv(tmp_path):
 def test_config_validation_names_the_field(field, value, match):
     with pytest.raises(ConfigError, match=match):
         small_config(**{field: value})
+
+
+def test_complete_extinction_restarts_the_run():
+    cfg = small_config(pop_size=20, max_stagnation=1, species_elitism=0, compatibility_threshold=100.0)
+    neat = NEAT(cfg, seeds=[4, 5])
+    extinct = []
+
+    class Watch(StatisticsReporter):
+        def complete_extinction(self, neat, runs):
+            extinct.extend(runs)
+
+    neat.add_reporter(Watch())
+    neat.run(lambda g: torch.zeros(2, 20, dtype=torch.float64), 4)  # nothing ever improves
+    assert sorted(set(extinct)) == [0, 1]
+    check_invariants(neat.genomes, cfg)
+    assert neat.genomes.pop_size == 20 and bool((neat.species >= 0).all())
+
+
+def test_tqdm_reporter_runs_and_closes(capsys):
+    from evolution.reporters import TqdmReporter
+
+    neat = NEAT(CFG, seeds=[1])
+    bar = neat.add_reporter(TqdmReporter(total=3))
+    neat.run(fitness_fn, 3)
+    assert bar.bar is None
+    assert "3/3" in capsys.readouterr().err
