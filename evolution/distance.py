@@ -28,7 +28,8 @@ __all__ = ["GeneStats", "gene_stats", "distance", "distance_matrix"]
 
 @dataclass
 class GeneStats:
-    """Per-genome gene vectors and summaries, ``[R, K, ...]``, float64."""
+    """Per-genome gene vectors and summaries, ``[R, K, ...]``, in the weights' dtype
+    (gene counts are small integers, exact in float32)."""
 
     has: Tensor  # [R, K, G] 1.0 where the gene exists
     w: Tensor  # [R, K, G] weight (0 where no gene)
@@ -36,7 +37,7 @@ class GeneStats:
     count: Tensor  # [R, K] genes
     abs_sum: Tensor  # [R, K] sum |w|
     top: Tensor  # [R, K] highest occupied flat slot (-1: none)
-    prefix: Tensor  # [R, K, G + 1] genes at flat slots < g
+    upto: Tensor  # [R, K, G] genes at flat slots <= g
     sigma: Tensor  # [R, K]
 
     def take(self, index: Tensor) -> GeneStats:
@@ -51,23 +52,27 @@ class GeneStats:
 
 def gene_stats(conn: Tensor, weight: Tensor, sigma: Tensor) -> GeneStats:
     """Statistics of genomes ``conn/weight [R, K, N, N]``, ``sigma [R, K]``."""
-    has = conn.flatten(2).to(torch.float64)
-    w = torch.where(conn, weight, 0.0).flatten(2).to(torch.float64)
+    has = conn.flatten(2).to(weight.dtype)
+    w = torch.where(conn, weight, 0.0).flatten(2)
     absw = w.abs()
     G = has.shape[-1]
-    idx = torch.arange(G, device=has.device)
-    top = torch.where(has > 0, idx, -1).amax(-1)
-    prefix = torch.cat([torch.zeros_like(has[..., :1]), has.cumsum(-1)], -1)
-    return GeneStats(has, w, absw, has.sum(-1), absw.sum(-1), top, prefix, sigma.to(torch.float64))
+    top = torch.where(conn.flatten(2), torch.arange(G, device=has.device), -1).amax(-1)
+    return GeneStats(has, w, absw, has.sum(-1), absw.sum(-1), top, has.cumsum(-1), sigma.to(weight.dtype))
+
+
+def _genes_upto(upto: Tensor, top: Tensor) -> Tensor:
+    """Genes of each ``upto`` row at slots <= each ``top`` (0 for top = -1): ``[R, Ka, Kb]``."""
+    Ka, Kb = upto.shape[1], top.shape[1]
+    counts = torch.gather(upto, 2, top.clamp_min(0).unsqueeze(1).expand(-1, Ka, Kb))
+    return torch.where(top.unsqueeze(1) >= 0, counts, 0.0)
 
 
 def distance(a: GeneStats, b: GeneStats, cfg: NEATConfig) -> Tensor:
     """Distances ``[R, Ka, Kb]`` between every genome of ``a`` and every genome of ``b``."""
-    Ka, Kb = a.count.shape[1], b.count.shape[1]
     bt = lambda t: t.transpose(1, 2)  # noqa: E731
     matching = a.has @ bt(b.has)
-    a_upto_top_b = torch.gather(a.prefix, 2, (b.top + 1).unsqueeze(1).expand(-1, Ka, Kb))
-    b_upto_top_a = bt(torch.gather(b.prefix, 2, (a.top + 1).unsqueeze(1).expand(-1, Kb, Ka)))
+    a_upto_top_b = _genes_upto(a.upto, b.top)
+    b_upto_top_a = bt(_genes_upto(b.upto, a.top))
     n_a, n_b = a.count.unsqueeze(-1), b.count.unsqueeze(1)
     excess = (n_a - a_upto_top_b) + (n_b - b_upto_top_a)
     disjoint = n_a + n_b - 2 * matching - excess

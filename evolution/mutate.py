@@ -72,26 +72,40 @@ def add_connection_candidates(g: Genomes, cfg: NEATConfig) -> Tensor:
     return cand
 
 
-def _pick_slot(mask: Tensor, rng: RunRNG) -> tuple[Tensor, Tensor, Tensor]:
-    """One uniformly random True slot (i, j) per genome of ``mask[R, P, N, N]``."""
-    R, P, N, _ = mask.shape
-    scores = torch.where(mask, rng.rand(P, N, N), -1.0).flatten(2)
-    flat = scores.argmax(-1)
-    return flat // N, flat % N, mask.flatten(2).any(-1)
+def _flat(t: Tensor) -> Tensor:
+    return t.flatten(0, 1)
+
+
+def _pick_for(mask: Tensor, scores: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    """For a subset of genomes: a uniformly random True slot (i, j)
+    of ``mask[K, N, N]`` (the rows' masks), using ``scores`` (the rows' uniform draws)."""
+    N = mask.shape[-1]
+    flat = torch.where(mask, scores, -1.0).flatten(1).argmax(-1)
+    return flat // N, flat % N, mask.flatten(1).any(-1)
 
 
 def mutate_add_connection(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> Genomes:
-    """With ``conn_add_prob``, add one new enabled gene at a random candidate slot."""
-    P = g.pop_size
+    """With ``conn_add_prob``, add one new enabled gene at a random candidate slot.
+
+    Candidates are computed only for the genomes that mutate (random numbers are still
+    drawn for all, so every run's stream is the same whatever happens elsewhere).
+    """
+    P, N = g.pop_size, g.num_nodes
     want = active & (rng.rand(P) < cfg.conn_add_prob)
-    src, dst, possible = _pick_slot(add_connection_candidates(g, cfg), rng)
+    scores = rng.rand(P, N, N)
     init = cfg.weight_init_mean + cfg.weight_init_stdev * rng.randn(P, dtype=g.weight.dtype)
     init = init.clamp(cfg.weight_min_value, cfg.weight_max_value)
-    do = want & possible
-    idx = torch.arange(g.num_nodes, device=g.device)
-    hit = ((idx == src.unsqueeze(-1)) & do.unsqueeze(-1)).unsqueeze(-1) & (idx == dst.unsqueeze(-1)).unsqueeze(-2)
-    weight = torch.where(hit, _bcast(init, g.weight), g.weight)
-    return Genomes(weight, g.conn | hit, g.enabled | hit, g.node, g.sigma)
+    rows = torch.nonzero(_flat(want)).squeeze(1)
+    if rows.numel() == 0:
+        return g
+    sub = Genomes(**{k: _flat(t)[rows].unsqueeze(0) for k, t in g.tensors().items()})
+    src, dst, possible = _pick_for(add_connection_candidates(sub, cfg)[0], _flat(scores)[rows])
+    rows, src, dst = rows[possible], src[possible], dst[possible]
+    weight, conn, enabled = g.weight.clone(), g.conn.clone(), g.enabled.clone()
+    _flat(weight)[rows, src, dst] = _flat(init)[rows]
+    _flat(conn)[rows, src, dst] = True
+    _flat(enabled)[rows, src, dst] = True
+    return Genomes(weight, conn, enabled, g.node, g.sigma)
 
 
 def mutate_add_node(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor,
@@ -104,26 +118,28 @@ def mutate_add_node(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor,
     representatives). Returns the genomes and ``[R, P]`` bool: splits refused for want
     of a free slot.
     """
-    P, N = g.pop_size, g.num_nodes
+    R, P, N = g.num_runs, g.pop_size, g.num_nodes
     want = active & (rng.rand(P) < cfg.node_add_prob)
-    src, dst, possible = _pick_slot(g.enabled, rng)
-    request = want & possible
+    scores = rng.rand(P, N, N)
+    src = torch.zeros(R * P, dtype=torch.long, device=g.device)
+    dst = torch.zeros_like(src)
+    possible = torch.zeros(R * P, dtype=torch.bool, device=g.device)
+    rows = torch.nonzero(_flat(want)).squeeze(1)
+    if rows.numel():
+        src[rows], dst[rows], possible[rows] = _pick_for(_flat(g.enabled)[rows], _flat(scores)[rows])
+    request = want & possible.view(R, P)
     used = g.node.any(1)
     if reserved is not None:
         used = used | reserved
-    k, granted = assign_split_nodes(src, dst, request, used, cfg.first_hidden)
-    idx = torch.arange(N, device=g.device)
-    # One-hot selectors for the touched slots.
-    at_src = (idx == src.unsqueeze(-1)) & granted.unsqueeze(-1)  # [R, P, N]
-    at_dst = idx == dst.unsqueeze(-1)
-    at_k = idx == k.unsqueeze(-1)
-    old_gene = at_src.unsqueeze(-1) & at_dst.unsqueeze(-2)  # (i, j)
-    in_gene = at_src.unsqueeze(-1) & at_k.unsqueeze(-2)  # (i, k)
-    out_gene = (at_k & granted.unsqueeze(-1)).unsqueeze(-1) & at_dst.unsqueeze(-2)  # (k, j)
-    old_w = torch.gather(g.weight.flatten(2), 2, (src * N + dst).unsqueeze(-1)).squeeze(-1)
-    weight = torch.where(in_gene, torch.ones((), dtype=g.weight.dtype, device=g.device), g.weight)
-    weight = torch.where(out_gene, _bcast(old_w, weight), weight)
-    new_genes = in_gene | out_gene
-    enabled = (g.enabled & ~old_gene) | new_genes
-    node = g.node | (at_k & granted.unsqueeze(-1))
-    return Genomes(weight, g.conn | new_genes, enabled, node, g.sigma), request & ~granted
+    k, granted = assign_split_nodes(src.view(R, P), dst.view(R, P), request, used, cfg.first_hidden)
+    rows = torch.nonzero(_flat(granted)).squeeze(1)
+    weight, conn, enabled, node = g.weight.clone(), g.conn.clone(), g.enabled.clone(), g.node.clone()
+    if rows.numel():
+        i, j, kk = src[rows], dst[rows], _flat(k)[rows]
+        w, c, e = _flat(weight), _flat(conn), _flat(enabled)
+        old_w = w[rows, i, j]
+        e[rows, i, j] = False
+        w[rows, i, kk], c[rows, i, kk], e[rows, i, kk] = 1.0, True, True
+        w[rows, kk, j], c[rows, kk, j], e[rows, kk, j] = old_w, True, True
+        _flat(node)[rows, kk] = True
+    return Genomes(weight, conn, enabled, node, g.sigma), request & ~granted

@@ -112,11 +112,17 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
     sp = SpeciesState(**{k: v.clone() for k, v in sp.tensors().items()})  # pure: never edit the input
     species = torch.full((R, P), -1, dtype=torch.long, device=dev)
     stats = gene_stats(g.conn, g.weight, g.sigma)
-    if bool(sp.alive.any()):
-        d = distance(stats, gene_stats(sp.rep_conn, sp.rep_weight, sp.rep_sigma), cfg)
-        d = torch.where(sp.alive.unsqueeze(1), d, torch.full_like(d, torch.inf))
-        best_d, best_s = d.min(-1)
-        species = torch.where(best_d < thr, best_s, species)
+    n_alive = int(sp.alive.sum(1).max())
+    if n_alive > 0:
+        # Compare against living representatives only: their slots, packed to the front
+        # (in slot order, so ties still go to the lowest slot).
+        live = torch.argsort((~sp.alive).to(torch.int8), dim=1, stable=True)[:, :n_alive]
+        idx = live[..., None, None].expand(-1, -1, *sp.rep_conn.shape[2:])
+        rep_stats = gene_stats(sp.rep_conn.gather(1, idx), sp.rep_weight.gather(1, idx), sp.rep_sigma.gather(1, live))
+        d = distance(stats, rep_stats, cfg)
+        d = torch.where(torch.gather(sp.alive, 1, live).unsqueeze(1), d, torch.full_like(d, torch.inf))
+        best_d, best_k = d.min(-1)
+        species = torch.where(best_d < thr, torch.gather(live, 1, best_k), species)
     # Genomes compatible with no species found new ones, in genome order as in [NEAT02]:
     # the first unassigned genome founds a species, every unassigned genome within the
     # threshold of it joins, and so on. Distances to the next FOUNDER_BATCH candidates are
