@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-__all__ = ["CartPoleParams", "PlantError", "cartpole_step", "cartpole_failed", "check_state", "X", "X_DOT",
+__all__ = ["CartPoleParams", "DEFAULT_PLANT", "PlantError", "cartpole_step", "cartpole_failed", "check_state", "X", "X_DOT",
            "THETA", "THETA_DOT"]
 
 X, X_DOT, THETA, THETA_DOT = 0, 1, 2, 3
@@ -41,7 +41,10 @@ class CartPoleParams:
                 raise ValueError(f"CartPoleParams.{name} must be a positive finite number, got {value!r}")
 
 
-def cartpole_step(state: Tensor, force: Tensor, tau: float, p: CartPoleParams = CartPoleParams()) -> Tensor:
+DEFAULT_PLANT = CartPoleParams()
+
+
+def cartpole_step(state: Tensor, force: Tensor, tau: float, p: CartPoleParams = DEFAULT_PLANT) -> Tensor:
     """One explicit-Euler step of ``tau`` seconds under ``force`` (N, shape ``state.shape[:-1]``)."""
     x, x_dot, theta, theta_dot = state.unbind(-1)
     total = p.cart_mass + p.pole_mass
@@ -52,7 +55,7 @@ def cartpole_step(state: Tensor, force: Tensor, tau: float, p: CartPoleParams = 
     return torch.stack([x + tau * x_dot, x_dot + tau * x_acc, theta + tau * theta_dot, theta_dot + tau * theta_acc], -1)
 
 
-def cartpole_failed(state: Tensor, p: CartPoleParams = CartPoleParams()) -> Tensor:
+def cartpole_failed(state: Tensor, p: CartPoleParams = DEFAULT_PLANT) -> Tensor:
     """True where the cart left the track or the pole fell past the limit."""
     return (state[..., X].abs() > p.x_limit) | (state[..., THETA].abs() > p.theta_limit)
 

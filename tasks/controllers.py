@@ -1,0 +1,195 @@
+"""Controllers for the paper's cart-pole tasks, and the closed loop that evaluates them.
+
+Every gap the paper leaves is chosen once, here, in ``SpikingSpec`` (spiking controllers)
+and ``SigmoidSpec`` (the sigmoid NEAT baselines), with the reason beside each value.
+
+Non-Markov task (Table II), NEAT-SNN: x and theta are normalised to [0, 1] over the failure
+limits and injected as currents into the two input neurons; every neuron gets a background
+current; the force is ``F = 10 (2 sigmoid(sigma * sum_i w_i r_i) - 1)`` over the neurons i
+wired to the output node, with ``r_i`` their firing rates (Hz) over the last few control
+steps and ``sigma`` evolved per genome.
+
+Sigmoid NEAT (baseline): the same normalised inputs plus a bias input, a recurrent sigmoid
+network updated once per control step (state carried across steps, NEAT's usual setting
+for pole balancing), ``F = 10 (2 y - 1)`` from the output ``y`` in (0, 1).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from evolution.config import NEATConfig
+from evolution.phenotype import NEAT_SIGMOID_SLOPE
+from evolution.population import Genomes
+from snn_torch.functional.izhikevich import QIU2019, IzhikevichParams, check_dt
+from snn_torch.functional.recurrent import recurrent_init, recurrent_izhikevich_step
+from tasks.cartpole import (
+    DEFAULT_PLANT,
+    THETA,
+    CartPoleParams,
+    X,
+    cartpole_failed,
+    cartpole_step,
+    check_state,
+)
+
+__all__ = ["SpikingSpec", "SigmoidSpec", "SpikingPolicy", "SigmoidPolicy", "closed_loop", "normalized_inputs"]
+
+
+@dataclass(frozen=True)
+class SpikingSpec:
+    """The spiking controller's free choices (the paper gives none of these values)."""
+
+    neuron: IzhikevichParams = QIU2019  # [Qiu19] Fig. 2's neuron for every node
+    dt_ms: float = 0.5  # snn_torch's validated default: rates within 3 Hz + 5 % of a fine reference
+    i_background: float = 5.0  # mV/ms (nA): alone, a neuron fires at ~40 Hz (f-I curve)
+    i_input_max: float = 15.0  # mV/ms added to an input neuron at normalised input 1: ~120 Hz more
+    rate_window_steps: int = 4  # control steps in the firing-rate window (40 ms at tau = 10 ms)
+
+    def __post_init__(self) -> None:
+        check_dt(self.dt_ms)
+        for name in ("i_background", "i_input_max"):
+            value = getattr(self, name)
+            if not math.isfinite(value):
+                raise ValueError(f"SpikingSpec.{name} must be finite, got {value!r}")
+        if self.rate_window_steps < 1:
+            raise ValueError(f"SpikingSpec.rate_window_steps must be >= 1, got {self.rate_window_steps}")
+
+
+@dataclass(frozen=True)
+class SigmoidSpec:
+    """The sigmoid baseline's free choices."""
+
+    updates_per_step: int = 1  # network updates per control step (NEAT pole balancing: 1)
+
+
+def normalized_inputs(state: Tensor, p: CartPoleParams) -> Tensor:
+    """x and theta mapped from [-limit, limit] to [0, 1] (clamped), ``[..., 2]``."""
+    x = (state[..., X] / p.x_limit + 1.0) * 0.5
+    th = (state[..., THETA] / p.theta_limit + 1.0) * 0.5
+    return torch.stack([x, th], -1).clamp(0.0, 1.0)
+
+
+class SpikingPolicy:
+    """NEAT-SNN for the non-Markov task: one batched recurrent Izhikevich network."""
+
+    def __init__(self, genomes: Genomes, config: NEATConfig, spec: SpikingSpec, tau_s: float,
+                 plant: CartPoleParams) -> None:
+        if config.num_inputs != 2 or config.num_outputs != 1:
+            raise ValueError("the non-Markov spiking controller needs num_inputs=2 and num_outputs=1, got "
+                             f"{config.num_inputs} and {config.num_outputs}")
+        self.cfg, self.spec, self.plant = config, spec, plant
+        N = genomes.num_nodes
+        w = genomes.effective_weight().reshape(-1, N, N)
+        self.w = w
+        self.w_out = w[:, :, config.first_output]  # weights into the output node, [B, N]
+        self.sigma = genomes.sigma.reshape(-1)
+        self.substeps = int(round(tau_s * 1000.0 / spec.dt_ms))
+        if abs(self.substeps * spec.dt_ms - tau_s * 1000.0) > 1e-9:
+            raise ValueError(f"tau ({tau_s * 1000} ms) must be a whole number of dt_ms ({spec.dt_ms} ms)")
+        B = w.shape[0]
+        self.state = recurrent_init((B, N), spec.neuron, device=w.device, dtype=w.dtype)
+        self.history = torch.zeros(spec.rate_window_steps, B, N, dtype=w.dtype, device=w.device)
+        self.step_index = 0
+        self.window_s = tau_s
+
+    def keep(self, rows: Tensor) -> None:
+        self.w, self.w_out, self.sigma = self.w[rows], self.w_out[rows], self.sigma[rows]
+        self.state = type(self.state)(*(t[rows] for t in self.state))
+        self.history = self.history[:, rows]
+
+    def act(self, plant_state: Tensor) -> tuple[Tensor, Tensor]:
+        """Force (N) for each batch row, and the spike counts of this control step."""
+        cfg, spec = self.cfg, self.spec
+        i_ext = torch.full_like(self.state.v, spec.i_background)
+        i_ext[:, : cfg.num_inputs] += spec.i_input_max * normalized_inputs(plant_state, self.plant).to(i_ext.dtype)
+        counts = torch.zeros_like(i_ext)
+        state = self.state
+        for _ in range(self.substeps):
+            z, state = recurrent_izhikevich_step(i_ext, state, self.w, spec.neuron, dt_ms=spec.dt_ms, validate=False)
+            counts = counts + z
+        self.state = state
+        self.history[self.step_index % spec.rate_window_steps] = counts
+        self.step_index += 1
+        steps_in_window = min(self.step_index, spec.rate_window_steps)
+        rates = self.history.sum(0) / (steps_in_window * self.window_s)  # Hz
+        drive = (rates * self.w_out).sum(-1)
+        force = 10.0 * (2.0 * torch.sigmoid(self.sigma * drive) - 1.0)
+        return force, counts
+
+
+class SigmoidPolicy:
+    """Sigmoid NEAT for the non-Markov task: a batched recurrent sigmoid network."""
+
+    def __init__(self, genomes: Genomes, config: NEATConfig, spec: SigmoidSpec, plant: CartPoleParams) -> None:
+        if config.num_inputs != 2 or config.num_outputs != 1:
+            raise ValueError("the non-Markov sigmoid controller needs num_inputs=2 and num_outputs=1")
+        self.cfg, self.spec, self.plant = config, spec, plant
+        N = genomes.num_nodes
+        self.w = genomes.effective_weight().reshape(-1, N, N)
+        self.values = torch.zeros(self.w.shape[0], N, dtype=self.w.dtype, device=self.w.device)
+
+    def keep(self, rows: Tensor) -> None:
+        self.w, self.values = self.w[rows], self.values[rows]
+
+    def act(self, plant_state: Tensor) -> tuple[Tensor, Tensor]:
+        cfg = self.cfg
+        inputs = normalized_inputs(plant_state, self.plant).to(self.w.dtype)
+        y = self.values
+        for _ in range(self.spec.updates_per_step):
+            y = y.clone()
+            y[:, : cfg.num_inputs] = inputs
+            y[:, cfg.num_inputs : cfg.first_output] = 1.0
+            y = torch.sigmoid(NEAT_SIGMOID_SLOPE * (y.unsqueeze(1) @ self.w).squeeze(1))
+            y[:, : cfg.num_inputs] = inputs
+            y[:, cfg.num_inputs : cfg.first_output] = 1.0
+        self.values = y
+        out = y[:, cfg.first_output]
+        return 10.0 * (2.0 * out - 1.0), y
+
+
+def closed_loop(policy, state0: Tensor, *, tau_s: float, max_steps: int, plant: CartPoleParams = DEFAULT_PLANT,
+                record: bool = False, compact_below: float = 0.5) -> tuple[Tensor, dict | None]:
+    """Run every batch row until it fails or reaches ``max_steps``; returns steps survived ``[B]``.
+
+    Rows that failed stop costing compute: when fewer than ``compact_below`` of the rows
+    still running are alive, the batch is compacted (policy state included). With
+    ``record``, returns x, theta, F and spike counts per step (for plots; no compaction).
+    """
+    B = state0.shape[0]
+    device = state0.device
+    steps = torch.zeros(B, dtype=torch.long, device=device)
+    rows = torch.arange(B, device=device)  # original index of each running row
+    state = state0.clone()
+    alive = torch.ones(B, dtype=torch.bool, device=device)
+    trace: dict | None = {"x": [], "theta": [], "force": [], "activity": []} if record else None
+    for _ in range(max_steps):
+        force, activity = policy.act(state)
+        moved = cartpole_step(state, force.to(state.dtype), tau_s, plant)
+        # Failed rows keep their last state: a fallen pole is not simulated further.
+        state = torch.where(alive.unsqueeze(-1), moved, state)
+        check_state(state, "cart-pole state after a control step")
+        alive = alive & ~cartpole_failed(state, plant)
+        steps[rows] += alive.long()
+        if trace is not None:
+            trace["x"].append(state[:, X].clone())
+            trace["theta"].append(state[:, THETA].clone())
+            trace["force"].append(force.clone())
+            trace["activity"].append(activity.clone())
+            if not bool(alive.any()):
+                break
+            continue
+        n_alive = int(alive.sum())
+        if n_alive == 0:
+            break
+        if n_alive < compact_below * alive.numel():
+            keep = torch.nonzero(alive).squeeze(1)
+            policy.keep(keep)
+            rows, state, alive = rows[keep], state[keep], alive[keep]
+    if trace is not None:
+        trace = {k: torch.stack(v) for k, v in trace.items()}
+    return steps, trace
