@@ -40,6 +40,9 @@ class GeneStats:
     upto: Tensor  # [R, K, G] genes at flat slots <= g
     sigma: Tensor  # [R, K]
 
+    def select_runs(self, runs: Tensor) -> GeneStats:
+        return GeneStats(**{name: getattr(self, name)[runs] for name in self.__dataclass_fields__})
+
     def take(self, index: Tensor) -> GeneStats:
         """Rows ``index[R, K']`` of each run."""
         out = {}

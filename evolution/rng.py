@@ -32,13 +32,17 @@ class RunRNG:
 
     def rand(self, *shape: int, dtype: torch.dtype = torch.float32) -> Tensor:
         """Uniform [0, 1) draws of shape ``[R, *shape]``."""
-        return torch.stack([torch.rand(shape, generator=g, device=self.device, dtype=dtype)
-                            for g in self.generators])
+        out = torch.empty((len(self.generators), *shape), device=self.device, dtype=dtype)
+        for g, row in zip(self.generators, out, strict=True):
+            row.uniform_(generator=g)
+        return out
 
     def randn(self, *shape: int, dtype: torch.dtype = torch.float32) -> Tensor:
         """Standard normal draws of shape ``[R, *shape]``."""
-        return torch.stack([torch.randn(shape, generator=g, device=self.device, dtype=dtype)
-                            for g in self.generators])
+        out = torch.empty((len(self.generators), *shape), device=self.device, dtype=dtype)
+        for g, row in zip(self.generators, out, strict=True):
+            row.normal_(generator=g)
+        return out
 
     def subset(self, runs: list[int]) -> RunRNG:
         """A view of some runs' generators (shared, not copied: draws advance them)."""

@@ -80,7 +80,7 @@ def empty_species(R: int, N: int, capacity: int, *, device: torch.device, dtype:
     )
 
 
-FOUNDER_BATCH = 8
+FOUNDER_BATCH = 16
 
 
 def _free_slot(species: Tensor, sp: SpeciesState, need: Tensor) -> tuple[Tensor, SpeciesState]:
@@ -136,7 +136,11 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
         key = torch.where(unassigned, positions, P + positions)
         cand = torch.topk(key, k_max, dim=1, largest=False).values  # first k unassigned (>= P: none)
         valid, cand = cand < P, cand % P
-        d_cand = distance(stats, stats.take(cand), cfg)  # [R, P, k]
+        # Only runs with unassigned genomes pay for distances (often a few of many runs).
+        need = torch.nonzero(unassigned.any(1)).squeeze(1)
+        sub = stats if need.numel() == R else stats.select_runs(need)
+        d_cand = torch.full((R, P, k_max), torch.inf, dtype=stats.w.dtype, device=dev)
+        d_cand[need] = distance(sub, sub.take(cand[need]), cfg)  # [R, P, k]
         for k in range(k_max):
             founder = cand[:, k]
             has = valid[:, k] & (species[runs, founder] < 0)
