@@ -29,3 +29,34 @@ def test_console_script_help():
     out = subprocess.run([sys.executable, "-m", "tasks.cli", "figures", "--help"],
                          capture_output=True, text=True, check=True).stdout
     assert "Fig. 1" in out and "--out" in out
+
+
+@pytest.mark.parametrize("command", ["figures", "xor", "evolve"])
+def test_every_subcommand_has_help(command, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([command, "--help"])
+    assert exc.value.code == 0
+    assert "--out" in capsys.readouterr().out
+
+
+def test_evolve_writes_statistics_and_a_loadable_champion(tmp_path):
+    from evolution.genome_io import load_genome
+    from tasks.experiments.cartpole import controller_config
+
+    assert main(["evolve", "--controller", "snn", "--generations", "2", "--out", str(tmp_path), "--verbose"]) == 0
+    rows = (tmp_path / "statistics.csv").read_text().splitlines()
+    assert len(rows) == 3 and rows[0].startswith("generation,run,best_fitness")
+    champion = load_genome(tmp_path / "champion.json", controller_config("snn"))
+    assert champion.conn.sum() >= 2
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["evolve", "--device", "nope"], "--device 'nope'"),
+    (["evolve", "--generations", "0"], "--generations"),
+    (["xor", "--runs", "-3"], "--runs"),
+])
+def test_bad_options_are_named(argv, match, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    text = str(exc.value.code) + capsys.readouterr().err
+    assert match in text
