@@ -40,8 +40,10 @@ class GeneStats:
     upto: Tensor  # [R, K, G] genes at flat slots <= g
     sigma: Tensor  # [R, K]
 
-    def select_runs(self, runs: Tensor) -> GeneStats:
-        return GeneStats(**{name: getattr(self, name)[runs] for name in self.__dataclass_fields__})
+    def select(self, runs: Tensor, index: Tensor) -> GeneStats:
+        """Rows ``index[R', K']`` of runs ``runs[R']`` (copies only those rows)."""
+        r = runs.unsqueeze(1)
+        return GeneStats(**{name: getattr(self, name)[r, index] for name in self.__dataclass_fields__})
 
     def take(self, index: Tensor) -> GeneStats:
         """Rows ``index[R, K']`` of each run."""

@@ -128,28 +128,31 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
     # threshold of it joins, and so on. Distances to the next FOUNDER_BATCH candidates are
     # computed in one call; the sequential rule is then resolved candidate by candidate.
     k_max = min(FOUNDER_BATCH, P)
-    positions = torch.arange(P, device=dev)
     while True:
         unassigned = species < 0
-        if not bool(unassigned.any()):
-            break
-        key = torch.where(unassigned, positions, P + positions)
-        cand = torch.topk(key, k_max, dim=1, largest=False).values  # first k unassigned (>= P: none)
-        valid, cand = cand < P, cand % P
-        # Only runs with unassigned genomes pay for distances (often a few of many runs).
         need = torch.nonzero(unassigned.any(1)).squeeze(1)
-        sub = stats if need.numel() == R else stats.select_runs(need)
-        d_cand = torch.full((R, P, k_max), torch.inf, dtype=stats.w.dtype, device=dev)
-        d_cand[need] = distance(sub, sub.take(cand[need]), cfg)  # [R, P, k]
-        for k in range(k_max):
-            founder = cand[:, k]
-            has = valid[:, k] & (species[runs, founder] < 0)
-            if not bool(has.any()):
+        if need.numel() == 0:
+            break
+        # Pack each run's unassigned genomes (in genome order) to the front: only they can
+        # found or join a new species, and they are usually few.
+        n_unassigned = unassigned[need].sum(1)
+        U = int(n_unassigned.max())
+        packed = torch.argsort((~unassigned[need]).to(torch.int8), dim=1, stable=True)[:, :U]  # genome indices
+        valid = torch.arange(U, device=dev) < n_unassigned.unsqueeze(1)
+        ustats = stats.select(need, packed)
+        k = min(k_max, U)
+        d_cand = distance(ustats, ustats.take(torch.arange(k, device=dev).expand(need.numel(), k)), cfg)
+        for c in range(k):
+            current = species[need.unsqueeze(1), packed]  # [R', U]
+            has_sub = valid[:, c] & (current[:, c] < 0)
+            if not bool(has_sub.any()):
                 continue
+            has = torch.zeros(R, dtype=torch.bool, device=dev)
+            has[need] = has_sub
             slot, sp = _free_slot(species, sp, has)
-            join = has.unsqueeze(1) & (species < 0) & (d_cand[..., k] < thr)
-            join[runs, founder] |= has  # the founder always joins its own species
-            species = torch.where(join, slot.unsqueeze(1), species)
+            join = has_sub.unsqueeze(1) & valid & (current < 0) & (d_cand[..., c] < thr)
+            join[:, c] |= has_sub  # the founder always joins its own species
+            species[need.unsqueeze(1), packed] = torch.where(join, slot[need].unsqueeze(1), current)
             s_idx = (runs, slot)
             sp.alive[s_idx] = sp.alive[s_idx] | has
             sp.best_fitness[s_idx] = torch.where(has, -torch.inf, sp.best_fitness[s_idx])
