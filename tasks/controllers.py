@@ -47,7 +47,9 @@ class SpikingSpec:
     neuron: IzhikevichParams = QIU2019  # [Qiu19] Fig. 2's neuron for every node
     dt_ms: float = 0.5  # snn_torch's validated default: rates within 3 Hz + 5 % of a fine reference
     i_background: float = 5.0  # mV/ms (nA): alone, a neuron fires at ~40 Hz (f-I curve)
-    i_input_max: float = 15.0  # mV/ms added to an input neuron at normalised input 1: ~120 Hz more
+    # mV/ms added to an input neuron at normalised input 1 (~40 -> ~500 Hz). Exploratory, 6 runs x
+    # 15 generations each: 15 -> best ~590 steps; 60 -> ~1000-1150; 120 -> ~770-1045. Still tuning.
+    i_input_max: float = 60.0
     rate_window_steps: int = 4  # control steps in the firing-rate window (40 ms at tau = 10 ms)
 
     def __post_init__(self) -> None:
