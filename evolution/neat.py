@@ -13,7 +13,6 @@ so each run's history is exactly what it would be alone.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -270,10 +269,3 @@ class NEAT:
         if tuple(self.genomes.weight.shape) != (R, P, N, N) or tuple(self.species.shape) != (R, P):
             raise CheckpointError(f"checkpoint {name!r} is malformed: tensor shapes do not match its config")
         return self
-
-    def replace_config(self, **changes) -> None:
-        """Change knobs that do not alter tensor shapes (rates, thresholds) mid-run."""
-        fixed = {"num_inputs", "num_outputs", "num_bias", "max_hidden", "pop_size"}
-        if fixed & changes.keys():
-            raise ConfigError(f"cannot change {sorted(fixed & changes.keys())} of a running population")
-        self.config = dataclasses.replace(self.config, **changes)

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import torch
 from torch import Tensor
 
@@ -42,6 +40,3 @@ def xor_solved(genomes: Genomes, config: NEATConfig = XOR_CONFIG) -> Tensor:
     out = xor_outputs(genomes, config)
     return ((out > 0.5) == (XOR_TARGETS.to(genomes.device) > 0.5)).all(-1)
 
-
-def with_config(**changes) -> NEATConfig:
-    return dataclasses.replace(XOR_CONFIG, **changes)
