@@ -201,10 +201,30 @@ class NEAT:
                 break
             self._report("start_generation")
             genomes = self.ask()
-            fitness = fitness_fn(genomes)
+            fitness = self.evaluate_active(fitness_fn, genomes)
             self.tell(fitness, None if solved_fn is None else solved_fn(genomes, self._check_fitness(fitness)))
         self._report("end_run")
         return self.result()
+
+    def evaluate_active(self, fitness_fn: FitnessFn, genomes: Genomes) -> Tensor:
+        """``fitness_fn`` on the unsolved runs only, ``[R, P]``; solved runs report their champion's fitness.
+
+        Solved runs are frozen, and evaluating them again would cost the most (their genomes
+        balance longest) and change nothing.
+        """
+        active = self.active_runs
+        if bool(active.all()):
+            return fitness_fn(genomes)
+        idx = torch.nonzero(active).flatten()
+        R, P = self.num_runs, self.config.pop_size
+        part = fitness_fn(genomes.select_runs(idx))
+        if not isinstance(part, Tensor) or tuple(part.shape) != (len(idx), P):
+            shape = tuple(part.shape) if isinstance(part, Tensor) else type(part).__name__
+            raise FitnessError(f"fitness_fn must return [runs, genomes] = [{len(idx)}, {P}] for the "
+                               f"{len(idx)} unsolved runs, got {shape}")
+        fitness = self.best_fitness.unsqueeze(1).expand(R, P).clone()
+        fitness[idx] = part.to(device=self.device, dtype=fitness.dtype)
+        return fitness
 
     def result(self) -> NEATResult:
         return NEATResult(self.best_fitness.clone(), self.best_genomes.clone(), self.solved_generation.clone(),
@@ -237,8 +257,13 @@ class NEAT:
     @classmethod
     def restore(cls, path: str | os.PathLike, *, device: str | torch.device | None = None) -> NEAT:
         """Load a checkpoint. Raises ``CheckpointError`` naming the file if it is damaged."""
-        data = load_checkpoint_dict(path, map_location="cpu")
-        name = os.fspath(path)
+        return cls.from_state_dict(load_checkpoint_dict(path, map_location="cpu"), device=device,
+                                   name=os.fspath(path))
+
+    @classmethod
+    def from_state_dict(cls, data: dict, *, device: str | torch.device | None = None,
+                        name: str = "<state dict>") -> NEAT:
+        """Rebuild a NEAT from ``state_dict()``; ``name`` labels errors (the file it came from)."""
         try:
             config = NEATConfig(**data["config"])
             dtype = getattr(torch, data["dtype"])

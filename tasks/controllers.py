@@ -25,6 +25,8 @@ from torch import Tensor
 from evolution.config import NEATConfig
 from evolution.phenotype import NEAT_SIGMOID_SLOPE
 from evolution.population import Genomes
+from snn_torch.functional.fused_cpu import fused_recurrent_izhikevich_steps
+from snn_torch.functional.fused_cpu import supports as fused_supports
 from snn_torch.functional.izhikevich import QIU2019, IzhikevichParams, check_dt
 from snn_torch.functional.recurrent import recurrent_init, recurrent_izhikevich_step
 from tasks.cartpole import (
@@ -36,6 +38,7 @@ from tasks.cartpole import (
     cartpole_step,
     check_state,
 )
+from tasks.fused_loop import MAX_NODES, MAX_WINDOW, loop_available, sigmoid_loop, spiking_loop
 
 __all__ = ["SpikingSpec", "SigmoidSpec", "SpikingPolicy", "SigmoidPolicy", "closed_loop", "normalized_inputs"]
 
@@ -51,10 +54,15 @@ class SpikingSpec:
     # 15 generations each: 15 -> best ~590 steps; 60 -> ~1000-1150; 120 -> ~770-1045. Still tuning.
     i_input_max: float = 60.0
     rate_window_steps: int = 4  # control steps in the firing-rate window (40 ms at tau = 10 ms)
+    # mV jump of the postsynaptic membrane per presynaptic spike per unit weight: a spike drives
+    # w * kick / dt_ms for one substep, so the kick does not depend on dt (Izhikevich 2003's networks
+    # add w to I for one 1 ms step: a w mV kick). With NEAT's weights (|w| <= 8) a few coincident
+    # spikes fire a neuron, the paper's "cluster of incoming spikes".
+    synapse_kick_mv: float = 1.0
 
     def __post_init__(self) -> None:
         check_dt(self.dt_ms)
-        for name in ("i_background", "i_input_max"):
+        for name in ("i_background", "i_input_max", "synapse_kick_mv"):
             value = getattr(self, name)
             if not math.isfinite(value):
                 raise ValueError(f"SpikingSpec.{name} must be finite, got {value!r}")
@@ -80,15 +88,19 @@ class SpikingPolicy:
     """NEAT-SNN for the non-Markov task: one batched recurrent Izhikevich network."""
 
     def __init__(self, genomes: Genomes, config: NEATConfig, spec: SpikingSpec, tau_s: float,
-                 plant: CartPoleParams) -> None:
+                 plant: CartPoleParams, *, use_fused: bool = True) -> None:
         if config.num_inputs != 2 or config.num_outputs != 1:
             raise ValueError("the non-Markov spiking controller needs num_inputs=2 and num_outputs=1, got "
                              f"{config.num_inputs} and {config.num_outputs}")
         self.cfg, self.spec, self.plant = config, spec, plant
         N = genomes.num_nodes
-        w = genomes.effective_weight().reshape(-1, N, N)
-        self.w = w
-        self.w_out = w[:, :, config.first_output]  # weights into the output node, [B, N]
+        # Simulate only node slots some genome uses: the index is sized for the largest genome.
+        self.nodes = torch.nonzero(genomes.node.reshape(-1, N).any(0)).flatten()
+        w = genomes.effective_weight().reshape(-1, N, N)[:, self.nodes][:, :, self.nodes]
+        N = len(self.nodes)
+        out = int(torch.nonzero(self.nodes == config.first_output).flatten()[0])
+        self.w_out = w[:, :, out]  # decoder weights into the output node, [B, N]
+        self.w = w * (spec.synapse_kick_mv / spec.dt_ms)  # synaptic current per spike (mV/ms)
         self.sigma = genomes.sigma.reshape(-1)
         self.substeps = int(round(tau_s * 1000.0 / spec.dt_ms))
         if abs(self.substeps * spec.dt_ms - tau_s * 1000.0) > 1e-9:
@@ -98,6 +110,21 @@ class SpikingPolicy:
         self.history = torch.zeros(spec.rate_window_steps, B, N, dtype=w.dtype, device=w.device)
         self.step_index = 0
         self.window_s = tau_s
+        # The fused C kernel repeats the torch step's arithmetic bit for bit (tested); torch otherwise.
+        self.fused = use_fused and fused_supports(self.state, self.w, spec.neuron)
+        self.tau_s = tau_s
+        self.loop_fused = (self.fused and spec.rate_window_steps <= MAX_WINDOW and loop_available()
+                           and plant_state_ok(w))
+
+    def run_fused(self, state0: Tensor, max_steps: int) -> Tensor | None:
+        """Steps balanced per row from ``state0``, by the closed-loop C kernel; None if unavailable."""
+        if not self.loop_fused or self.step_index:
+            return None
+        spec = self.spec
+        return spiking_loop(self.w, self.w_out, self.sigma, state0, max_steps=max_steps, substeps=self.substeps,
+                            window=spec.rate_window_steps, dt_ms=spec.dt_ms, neuron=spec.neuron,
+                            i_background=spec.i_background, i_input_max=spec.i_input_max, window_s=self.window_s,
+                            tau_s=self.tau_s, plant=self.plant)
 
     def keep(self, rows: Tensor) -> None:
         self.w, self.w_out, self.sigma = self.w[rows], self.w_out[rows], self.sigma[rows]
@@ -109,17 +136,24 @@ class SpikingPolicy:
         cfg, spec = self.cfg, self.spec
         i_ext = torch.full_like(self.state.v, spec.i_background)
         i_ext[:, : cfg.num_inputs] += spec.i_input_max * normalized_inputs(plant_state, self.plant).to(i_ext.dtype)
-        counts = torch.zeros_like(i_ext)
-        state = self.state
-        for _ in range(self.substeps):
-            z, state = recurrent_izhikevich_step(i_ext, state, self.w, spec.neuron, dt_ms=spec.dt_ms, validate=False)
-            counts = counts + z
-        self.state = state
+        if self.fused:
+            counts, self.state = fused_recurrent_izhikevich_steps(i_ext, self.state, self.w, spec.neuron,
+                                                                  dt_ms=spec.dt_ms, substeps=self.substeps)
+        else:
+            counts = torch.zeros_like(i_ext)
+            state = self.state
+            for _ in range(self.substeps):
+                z, state = recurrent_izhikevich_step(i_ext, state, self.w, spec.neuron, dt_ms=spec.dt_ms,
+                                                     validate=False)
+                counts = counts + z
+            self.state = state
         self.history[self.step_index % spec.rate_window_steps] = counts
         self.step_index += 1
         steps_in_window = min(self.step_index, spec.rate_window_steps)
         rates = self.history.sum(0) / (steps_in_window * self.window_s)  # Hz
-        drive = (rates * self.w_out).sum(-1)
+        # A sequential sum (cumsum): node slots another genome of the batch uses add exact
+        # zeros here, so a genome's force does not depend on the batch it is evaluated in.
+        drive = torch.cumsum(rates * self.w_out, -1)[:, -1]
         force = 10.0 * (2.0 * torch.sigmoid(self.sigma * drive) - 1.0)
         return force, counts
 
@@ -127,19 +161,32 @@ class SpikingPolicy:
 class SigmoidPolicy:
     """Sigmoid NEAT for the non-Markov task: a batched recurrent sigmoid network."""
 
-    def __init__(self, genomes: Genomes, config: NEATConfig, spec: SigmoidSpec, plant: CartPoleParams) -> None:
+    def __init__(self, genomes: Genomes, config: NEATConfig, spec: SigmoidSpec, plant: CartPoleParams,
+                 *, tau_s: float = 0.01, use_fused: bool = True) -> None:
         if config.num_inputs != 2 or config.num_outputs != 1:
             raise ValueError("the non-Markov sigmoid controller needs num_inputs=2 and num_outputs=1")
-        self.cfg, self.spec, self.plant = config, spec, plant
+        self.cfg, self.spec, self.plant, self.tau_s = config, spec, plant, tau_s
         N = genomes.num_nodes
         self.w = genomes.effective_weight().reshape(-1, N, N)
         self.values = torch.zeros(self.w.shape[0], N, dtype=self.w.dtype, device=self.w.device)
+        self.loop_fused = use_fused and plant_state_ok(self.w) and N <= MAX_NODES and loop_available()
+        self.stepped = False
+
+    def run_fused(self, state0: Tensor, max_steps: int) -> Tensor | None:
+        """Steps balanced per row from ``state0``, by the closed-loop C kernel; None if unavailable."""
+        if not self.loop_fused or self.stepped:
+            return None
+        cfg = self.cfg
+        return sigmoid_loop(self.w, state0, num_inputs=cfg.num_inputs, first_output=cfg.first_output,
+                            max_steps=max_steps, updates=self.spec.updates_per_step, slope=NEAT_SIGMOID_SLOPE,
+                            tau_s=self.tau_s, plant=self.plant)
 
     def keep(self, rows: Tensor) -> None:
         self.w, self.values = self.w[rows], self.values[rows]
 
     def act(self, plant_state: Tensor) -> tuple[Tensor, Tensor]:
         cfg = self.cfg
+        self.stepped = True
         inputs = normalized_inputs(plant_state, self.plant).to(self.w.dtype)
         y = self.values
         for _ in range(self.spec.updates_per_step):
@@ -154,6 +201,11 @@ class SigmoidPolicy:
         return 10.0 * (2.0 * out - 1.0), y
 
 
+def plant_state_ok(w: Tensor) -> bool:
+    """The closed-loop C kernels run CPU float32/float64 batches."""
+    return w.device.type == "cpu" and w.dtype in (torch.float32, torch.float64)
+
+
 def closed_loop(policy, state0: Tensor, *, tau_s: float, max_steps: int, plant: CartPoleParams = DEFAULT_PLANT,
                 record: bool = False, compact_below: float = 0.5) -> tuple[Tensor, dict | None]:
     """Run every batch row until it fails or reaches ``max_steps``; returns steps survived ``[B]``.
@@ -161,7 +213,13 @@ def closed_loop(policy, state0: Tensor, *, tau_s: float, max_steps: int, plant: 
     Rows that failed stop costing compute: when fewer than ``compact_below`` of the rows
     still running are alive, the batch is compacted (policy state included). With
     ``record``, returns x, theta, F and spike counts per step (for plots; no compaction).
+    On CPU, a policy with a closed-loop C kernel (``run_fused``) runs there instead, one
+    thread per row, and returns the same steps to rounding (``tests/tasks/test_fused_loop.py``).
     """
+    if not record:
+        fused = getattr(policy, "run_fused", lambda *_: None)(state0, max_steps)
+        if fused is not None:
+            return fused.to(state0.device), None
     B = state0.shape[0]
     device = state0.device
     steps = torch.zeros(B, dtype=torch.long, device=device)

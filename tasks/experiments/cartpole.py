@@ -63,7 +63,7 @@ def nonmarkov_fitness(controller: str, config: NEATConfig, *, spiking: SpikingSp
         if controller == "snn":
             policy = SpikingPolicy(genomes, config, spiking, tau, plant)
         else:
-            policy = SigmoidPolicy(genomes, config, sigmoid, plant)
+            policy = SigmoidPolicy(genomes, config, sigmoid, plant, tau_s=tau)
         B = genomes.num_runs * genomes.pop_size
         steps, _ = closed_loop(policy, nonmarkov_start(B, device=genomes.device), tau_s=tau,
                                max_steps=steps_max, plant=plant)

@@ -54,10 +54,13 @@ def test_compaction_does_not_change_results(kind, cfg):
 def test_record_returns_traces_and_spikes():
     g = _population(SNN_CFG)
     one = g.select_runs([0]).gather(torch.tensor([[0]]))
-    steps, trace = closed_loop(_policy("snn", one, SNN_CFG), _start(1), tau_s=0.01, max_steps=50, record=True)
+    policy = _policy("snn", one, SNN_CFG)
+    steps, trace = closed_loop(policy, _start(1), tau_s=0.01, max_steps=50, record=True)
     T = trace["x"].shape[0]
     assert T == min(50, steps.item() + 1)
-    assert trace["activity"].shape == (T, 1, SNN_CFG.num_nodes) and trace["activity"].sum() > 0
+    # Activity columns are the node slots the genome uses, in slot order.
+    assert policy.nodes.tolist() == torch.nonzero(one.node[0, 0]).flatten().tolist()
+    assert trace["activity"].shape == (T, 1, len(policy.nodes)) and trace["activity"].sum() > 0
     assert bool((trace["force"].abs() <= 10).all())
 
 

@@ -1,0 +1,194 @@
+"""The non-Markov cart-pole closed loop as one C kernel: plant, encoder, network, decoder.
+
+``tasks.controllers.closed_loop`` is the readable reference: a few dozen torch ops per
+control step over the whole batch. This kernel runs each batch row's whole episode in one C
+loop (rows spread over threads), so a row stops costing anything the moment it fails, no
+Python runs per control step, and a row's result depends on nothing but its own genome: the
+same in any batch, with any thread count. The arithmetic repeats the reference's operations
+in order (no contraction); only ``sin``, ``cos`` and ``exp`` come from the C library rather
+than torch's vectorised versions, so the two paths agree to rounding (tested), not bit for bit.
+"""
+
+from __future__ import annotations
+
+import ctypes
+
+import torch
+from torch import Tensor
+
+from snn_torch._cbuild import load_c_library
+from snn_torch.functional.fused_cpu import MAX_NODES, ROW_SOURCE
+from tasks.cartpole import CartPoleParams, PlantError
+
+__all__ = ["loop_available", "spiking_loop", "sigmoid_loop"]
+
+_LOOP_SOURCE = r"""
+#define DEFINE_PLANT(NAME, T)                                                                  \
+/* Explicit Euler as tasks.cartpole.cartpole_step, same operation order. */                    \
+/* mpl = m_pole * l and total = m_cart + m_pole come rounded from double, as in torch. */     \
+static inline void NAME(T *s, T force, T tau, T g, T total, T mp, T mpl, T l) {                \
+    T x = s[0], xd = s[1], th = s[2], thd = s[3];                                              \
+    T sn = sin(th), cs = cos(th);                                                              \
+    T temp = (-force - mpl * thd * thd * sn) / total;                                            \
+    T thacc = (g * sn + cs * temp) / (l * ((T)(4.0 / 3.0) - mp * cs * cs / total));           \
+    T xacc = (force + mpl * (thd * thd * sn - thacc * cs)) / total;                             \
+    s[0] = x + tau * xd; s[1] = xd + tau * xacc; s[2] = th + tau * thd; s[3] = thd + tau * thacc; \
+}
+DEFINE_PLANT(plant_f32, float)
+DEFINE_PLANT(plant_f64, double)
+
+#define NORM(T, v, lim) ({ T q_ = ((v) / (lim) + (T)1.0) * (T)0.5; q_ < 0 ? (T)0 : (q_ > 1 ? (T)1 : q_); })
+
+/* status[r]: 0 ok, 1 the plant produced NaN or inf. */
+#define DEFINE_SNN_LOOP(NAME, ROW, PLANT, T, SIN, COS, EXP)                                    \
+void NAME(const T *w, const T *wout, const T *sigma, const T *state0, int64_t *steps,         \
+          int64_t *status, int64_t rows, int64_t n, int64_t max_steps, int64_t substeps,      \
+          int64_t window, T dt, T a, T b, T c, T d, T vpeak, T ibg, T imax, T window_s,        \
+          T tau, T g, T total, T mp, T mpl, T l, T xlim, T thlim, int threads) {                         \
+    _Pragma("omp parallel for schedule(dynamic, 4) num_threads(threads)")                      \
+    for (int64_t r = 0; r < rows; ++r) {                                                       \
+        T vv[MAXN], uu[MAXN], zz[MAXN], I[MAXN], cnt[MAXN], hist[16 * MAXN];                  \
+        const T *W = w + r * n * n, *WO = wout + r * n;                                        \
+        T s[4] = {state0[4 * r], state0[4 * r + 1], state0[4 * r + 2], state0[4 * r + 3]};      \
+        for (int64_t j = 0; j < n; ++j) { vv[j] = (T)-65.0; uu[j] = b * vv[j]; zz[j] = 0; }   \
+        for (int64_t k = 0; k < window * n; ++k) hist[k] = 0;                                  \
+        int64_t t = 0; status[r] = 0;                                                          \
+        for (; t < max_steps; ++t) {                                                           \
+            T xn = NORM(T, s[0], xlim), thn = NORM(T, s[2], thlim);                            \
+            for (int64_t j = 0; j < n; ++j) I[j] = ibg;                                        \
+            I[0] = ibg + imax * xn; I[1] = ibg + imax * thn;                                   \
+            for (int64_t j = 0; j < n; ++j) cnt[j] = 0;                                        \
+            ROW(vv, uu, zz, W, I, cnt, n, substeps, dt, a, b, c, d, vpeak);                    \
+            T *slot = hist + (t % window) * n;                                                 \
+            for (int64_t j = 0; j < n; ++j) slot[j] = cnt[j];                                  \
+            int64_t in_window = t + 1 < window ? t + 1 : window;                               \
+            T denom = (T)((double)in_window * (double)window_s);                               \
+            double acc = 0;                                                                    \
+            for (int64_t j = 0; j < n; ++j) {                                                  \
+                T sum = hist[j];                                                               \
+                for (int64_t k = 1; k < window; ++k) sum += hist[k * n + j];                   \
+                acc += (double)((sum / denom) * WO[j]);                                        \
+            }                                                                                  \
+            T drive = (T)acc;                                                                  \
+            T fn = (T)1 / ((T)1 + EXP(-(sigma[r] * drive)));                                   \
+            T force = (T)10.0 * ((T)2.0 * fn - (T)1.0);                                        \
+            PLANT(s, force, tau, g, total, mp, mpl, l);                                                \
+            if (!(isfinite(s[0]) && isfinite(s[1]) && isfinite(s[2]) && isfinite(s[3]))) {     \
+                status[r] = 1; break;                                                          \
+            }                                                                                  \
+            if (fabs((double)s[0]) > (double)xlim || fabs((double)s[2]) > (double)thlim) break; \
+        }                                                                                      \
+        steps[r] = t;                                                                          \
+    }                                                                                          \
+}
+DEFINE_SNN_LOOP(snn_loop_f32, izh_f32_row, plant_f32, float, sinf, cosf, expf)
+DEFINE_SNN_LOOP(snn_loop_f64, izh_f64_row, plant_f64, double, sin, cos, exp)
+
+#define DEFINE_SIG_LOOP(NAME, PLANT, T, EXP)                                                   \
+void NAME(const T *w, const T *state0, int64_t *steps, int64_t *status, int64_t rows,          \
+          int64_t n, int64_t n_in, int64_t first_out, int64_t max_steps, int64_t updates,      \
+          T slope, T tau, T g, T total, T mp, T mpl, T l, T xlim, T thlim, int threads) {                \
+    _Pragma("omp parallel for schedule(dynamic, 4) num_threads(threads)")                      \
+    for (int64_t r = 0; r < rows; ++r) {                                                       \
+        T y[MAXN], yn[MAXN];                                                                   \
+        const T *W = w + r * n * n;                                                            \
+        T s[4] = {state0[4 * r], state0[4 * r + 1], state0[4 * r + 2], state0[4 * r + 3]};      \
+        for (int64_t j = 0; j < n; ++j) y[j] = 0;                                              \
+        int64_t t = 0; status[r] = 0;                                                          \
+        for (; t < max_steps; ++t) {                                                           \
+            T in[2] = {NORM(T, s[0], xlim), NORM(T, s[2], thlim)};                             \
+            for (int64_t k = 0; k < updates; ++k) {                                            \
+                for (int64_t j = 0; j < n_in; ++j) y[j] = in[j];                               \
+                for (int64_t j = n_in; j < first_out; ++j) y[j] = 1;                           \
+                for (int64_t j = 0; j < n; ++j) {                                              \
+                    T acc = 0;                                                                 \
+                    for (int64_t i = 0; i < n; ++i) acc += y[i] * W[i * n + j];                \
+                    yn[j] = (T)1 / ((T)1 + EXP(-(slope * acc)));                               \
+                }                                                                              \
+                for (int64_t j = 0; j < n; ++j) y[j] = yn[j];                                  \
+                for (int64_t j = 0; j < n_in; ++j) y[j] = in[j];                               \
+                for (int64_t j = n_in; j < first_out; ++j) y[j] = 1;                           \
+            }                                                                                  \
+            T force = (T)10.0 * ((T)2.0 * y[first_out] - (T)1.0);                              \
+            PLANT(s, force, tau, g, total, mp, mpl, l);                                                \
+            if (!(isfinite(s[0]) && isfinite(s[1]) && isfinite(s[2]) && isfinite(s[3]))) {     \
+                status[r] = 1; break;                                                          \
+            }                                                                                  \
+            if (fabs((double)s[0]) > (double)xlim || fabs((double)s[2]) > (double)thlim) break; \
+        }                                                                                      \
+        steps[r] = t;                                                                          \
+    }                                                                                          \
+}
+DEFINE_SIG_LOOP(sig_loop_f32, plant_f32, float, expf)
+DEFINE_SIG_LOOP(sig_loop_f64, plant_f64, double, exp)
+"""
+
+MAX_WINDOW = 16
+_lib: ctypes.CDLL | None = None
+
+
+def loop_available() -> bool:
+    """True if the closed-loop kernels compiled (once per process) and are enabled."""
+    global _lib
+    _lib = load_c_library("cartpole_loop", ROW_SOURCE + _LOOP_SOURCE)
+    if _lib is not None and not hasattr(_lib, "_typed"):
+        for suffix, ct in (("f32", ctypes.c_float), ("f64", ctypes.c_double)):
+            snn = getattr(_lib, f"snn_loop_{suffix}")
+            snn.restype = None
+            snn.argtypes = [ctypes.c_void_p] * 6 + [ctypes.c_int64] * 5 + [ct] * 17 + [ctypes.c_int]
+            sig = getattr(_lib, f"sig_loop_{suffix}")
+            sig.restype = None
+            sig.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int64] * 6 + [ct] * 9 + [ctypes.c_int]
+        _lib._typed = True
+    return _lib is not None
+
+
+def _plant_args(plant: CartPoleParams) -> list[float]:
+    # Python evaluates these products in double before torch rounds them; so do we.
+    return [plant.gravity, plant.cart_mass + plant.pole_mass, plant.pole_mass, plant.pole_mass * plant.half_length,
+            plant.half_length, plant.x_limit, plant.theta_limit]
+
+
+def _finish(steps: Tensor, status: Tensor) -> Tensor:
+    bad = torch.nonzero(status).flatten()
+    if len(bad):
+        raise PlantError(f"cart-pole state after a control step holds NaN or inf at {len(bad)} batch "
+                         f"index/indices, first: {bad[:10].tolist()}")
+    return steps
+
+
+def spiking_loop(w: Tensor, w_out: Tensor, sigma: Tensor, state0: Tensor, *, max_steps: int, substeps: int,
+                 window: int, dt_ms: float, neuron, i_background: float, i_input_max: float, window_s: float,
+                 tau_s: float, plant: CartPoleParams) -> Tensor:
+    """Steps balanced per row for the non-Markov spiking controller (see ``SpikingPolicy``)."""
+    B, N = w_out.shape
+    if N > MAX_NODES or window > MAX_WINDOW:
+        raise ValueError(f"the fused loop handles N <= {MAX_NODES} and windows <= {MAX_WINDOW}, got {N}, {window}")
+    dtype = w.dtype
+    w, w_out, sigma = w.contiguous(), w_out.contiguous(), sigma.to(dtype).contiguous()
+    s0 = state0.to(dtype).contiguous()
+    steps = torch.empty(B, dtype=torch.int64)
+    status = torch.empty(B, dtype=torch.int64)
+    fn = _lib.snn_loop_f32 if dtype == torch.float32 else _lib.snn_loop_f64
+    fn(w.data_ptr(), w_out.data_ptr(), sigma.data_ptr(), s0.data_ptr(), steps.data_ptr(), status.data_ptr(),
+       B, N, int(max_steps), int(substeps), int(window), float(dt_ms), float(neuron.a), float(neuron.b),
+       float(neuron.c), float(neuron.d), float(neuron.v_peak), float(i_background), float(i_input_max),
+       float(window_s), float(tau_s), *_plant_args(plant), torch.get_num_threads())
+    return _finish(steps, status)
+
+
+def sigmoid_loop(w: Tensor, state0: Tensor, *, num_inputs: int, first_output: int, max_steps: int, updates: int,
+                 slope: float, tau_s: float, plant: CartPoleParams) -> Tensor:
+    """Steps balanced per row for the non-Markov sigmoid controller (see ``SigmoidPolicy``)."""
+    B, N = w.shape[0], w.shape[-1]
+    if N > MAX_NODES:
+        raise ValueError(f"the fused loop handles N <= {MAX_NODES}, got {N}")
+    dtype = w.dtype
+    w = w.contiguous()
+    s0 = state0.to(dtype).contiguous()
+    steps = torch.empty(B, dtype=torch.int64)
+    status = torch.empty(B, dtype=torch.int64)
+    fn = _lib.sig_loop_f32 if dtype == torch.float32 else _lib.sig_loop_f64
+    fn(w.data_ptr(), s0.data_ptr(), steps.data_ptr(), status.data_ptr(), B, N, int(num_inputs), int(first_output),
+       int(max_steps), int(updates), float(slope), float(tau_s), *_plant_args(plant), torch.get_num_threads())
+    return _finish(steps, status)
