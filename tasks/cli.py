@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from pathlib import Path
 
 
 def _positive_float(text: str) -> float:
@@ -90,6 +91,41 @@ def _cmd_evolve(args: argparse.Namespace) -> int:
     return 0
 
 
+def _controllers(text: str) -> list[str]:
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    bad = [n for n in names if n not in ("snn", "sigmoid")]
+    if not names or bad or len(set(names)) != len(names):
+        raise argparse.ArgumentTypeError(f"expected a comma-separated subset of snn,sigmoid, got {text!r}")
+    return names
+
+
+def _cmd_reproduce(args: argparse.Namespace) -> int:
+    import shlex
+
+    import torch
+
+    from tasks.experiments.reproduce import ReproduceError, run_controller, write_report
+
+    if args.threads is not None:
+        torch.set_num_threads(args.threads)
+    seeds = list(range(args.seed, args.seed + args.runs))
+    command = "snn-neat " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["reproduce"] else (
+        f"snn-neat reproduce {args.table} --runs {args.runs} --seed {args.seed} --out {args.out}")
+    results = {}
+    try:
+        for c in args.controllers:
+            results[c] = run_controller(args.table, c, seeds, args.generations, args.out, resume=args.resume,
+                                        self_loops=args.self_loops, checkpoint_every=args.checkpoint_every,
+                                        device=args.device, progress=not args.quiet)
+    except ReproduceError as exc:
+        raise SystemExit(f"snn-neat reproduce: error: {exc}") from None
+    for path in write_report(results, args.table, args.out, command=command, generalization=not args.no_generalization):
+        if path.suffix != ".json" or path.parent.name != "champions":
+            print(f"wrote {path}")
+    print((Path(args.out) / f"{args.table}.md").read_text())
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="snn-neat", description="Evolving spiking neural networks in PyTorch.")
@@ -131,11 +167,38 @@ def build_parser() -> argparse.ArgumentParser:
     evo.add_argument("--verbose", action="store_true", help="a line per generation instead of a progress bar")
     evo.add_argument("--report-every", type=_positive_int, default=1, help="with --verbose: every N generations")
     evo.set_defaults(func=_cmd_evolve)
+
+    rep = sub.add_parser(
+        "reproduce", help="reproduce the paper's Table I or II (NEAT-SNN vs sigmoid NEAT, many seeded runs)",
+        description="Reproduce Qiu et al.'s Table I (Markov cart-pole) or Table II (non-Markov): RUNS seeded runs "
+                    "(seeds SEED..SEED+RUNS-1) of each controller, all runs of a controller in one batch, with a "
+                    "checkpoint after every generation. Writes TABLE.md/.csv (best, worst, median, mean with "
+                    "failures as GENERATIONS+1, failure rate, Mann-Whitney U p-value), runs.csv, summary.json, "
+                    "fig8_best_fitness.png, trajectory and topology plots and every champion genome.")
+    rep.add_argument("table", choices=["table1", "table2"], help="which table to reproduce")
+    rep.add_argument("--runs", type=_positive_int, default=60, help="runs per controller (default: 60, the paper's)")
+    rep.add_argument("--seed", type=_non_negative_int, default=0, help="first seed (default: 0)")
+    rep.add_argument("--generations", type=_positive_int, default=100, help="budget per run (default: 100)")
+    rep.add_argument("--controllers", type=_controllers, default=["snn", "sigmoid"],
+                     help="comma-separated subset of snn,sigmoid (default: both)")
+    rep.add_argument("--self-loops", action="store_true",
+                     help="start genomes with an output self-connection (sensitivity check; the paper has none)")
+    rep.add_argument("--out", default=None, help="output folder (default: results/TABLE)")
+    rep.add_argument("--resume", action="store_true", help="continue from the checkpoints in --out")
+    rep.add_argument("--checkpoint-every", type=_positive_int, default=1, help="generations between checkpoints")
+    rep.add_argument("--device", default="cpu", help="torch device (default: cpu)")
+    rep.add_argument("--threads", type=_positive_int, default=None, help="torch threads (default: torch's)")
+    rep.add_argument("--no-generalization", action="store_true",
+                     help="skip the 625-start-state generalisation test of every champion")
+    rep.add_argument("--quiet", action="store_true", help="no progress bar")
+    rep.set_defaults(func=_cmd_reproduce)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if getattr(args, "command", None) == "reproduce" and args.out is None:
+        args.out = f"results/{args.table}"
     return args.func(args)
 
 

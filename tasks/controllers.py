@@ -32,15 +32,26 @@ from snn_torch.functional.recurrent import recurrent_init, recurrent_izhikevich_
 from tasks.cartpole import (
     DEFAULT_PLANT,
     THETA,
+    THETA_DOT,
+    X_DOT,
     CartPoleParams,
     X,
     cartpole_failed,
     cartpole_step,
     check_state,
 )
-from tasks.fused_loop import MAX_NODES, MAX_WINDOW, loop_available, sigmoid_loop, spiking_loop
+from tasks.fused_loop import (
+    MAX_NODES,
+    MAX_WINDOW,
+    genome_keys,
+    loop_available,
+    markov_spiking_loop,
+    sigmoid_loop,
+    spiking_loop,
+)
 
-__all__ = ["SpikingSpec", "SigmoidSpec", "SpikingPolicy", "SigmoidPolicy", "closed_loop", "normalized_inputs"]
+__all__ = ["SpikingSpec", "SigmoidSpec", "MarkovSpikingSpec", "SpikingPolicy", "SigmoidPolicy", "MarkovSpikingPolicy",
+           "closed_loop", "normalized_inputs", "markov_limits", "MARKOV_OBSERVE"]
 
 
 @dataclass(frozen=True)
@@ -77,11 +88,21 @@ class SigmoidSpec:
     updates_per_step: int = 1  # network updates per control step (NEAT pole balancing: 1)
 
 
-def normalized_inputs(state: Tensor, p: CartPoleParams) -> Tensor:
-    """x and theta mapped from [-limit, limit] to [0, 1] (clamped), ``[..., 2]``."""
-    x = (state[..., X] / p.x_limit + 1.0) * 0.5
-    th = (state[..., THETA] / p.theta_limit + 1.0) * 0.5
-    return torch.stack([x, th], -1).clamp(0.0, 1.0)
+def _sigmoid(x: Tensor) -> Tensor:
+    # torch.sigmoid's vectorised and scalar-tail paths differ in the last bit, so a row's
+    # result would depend on its position in the batch; this form does not.
+    return 1.0 / (1.0 + torch.exp(-x))
+
+
+def normalized_inputs(state: Tensor, p: CartPoleParams, observe: tuple[int, ...] = (X, THETA),
+                      limits: tuple[float, ...] | None = None) -> Tensor:
+    """State variables ``observe`` mapped from [-limit, limit] to [0, 1] (clamped), ``[..., len(observe)]``.
+
+    Default: x and theta over the failure limits (the non-Markov inputs).
+    """
+    limits = (p.x_limit, p.theta_limit) if limits is None else limits
+    cols = [(state[..., k] / lim + 1.0) * 0.5 for k, lim in zip(observe, limits, strict=True)]
+    return torch.stack(cols, -1).clamp(0.0, 1.0)
 
 
 class SpikingPolicy:
@@ -154,18 +175,27 @@ class SpikingPolicy:
         # A sequential sum (cumsum): node slots another genome of the batch uses add exact
         # zeros here, so a genome's force does not depend on the batch it is evaluated in.
         drive = torch.cumsum(rates * self.w_out, -1)[:, -1]
-        force = 10.0 * (2.0 * torch.sigmoid(self.sigma * drive) - 1.0)
+        force = 10.0 * (2.0 * _sigmoid(self.sigma * drive) - 1.0)
         return force, counts
 
 
 class SigmoidPolicy:
-    """Sigmoid NEAT for the non-Markov task: a batched recurrent sigmoid network."""
+    """Sigmoid NEAT: a batched recurrent sigmoid network.
+
+    Non-Markov task (default): inputs x and theta, ``F = 10 (2 y - 1)``. Markov task:
+    ``observe=MARKOV_OBSERVE, limits=markov_limits(plant), bang_bang=True``: all four state
+    variables, ``F = +10 N`` if ``y > 0.5`` else ``-10 N`` (NEAT's pole-balancing output).
+    """
 
     def __init__(self, genomes: Genomes, config: NEATConfig, spec: SigmoidSpec, plant: CartPoleParams,
-                 *, tau_s: float = 0.01, use_fused: bool = True) -> None:
-        if config.num_inputs != 2 or config.num_outputs != 1:
-            raise ValueError("the non-Markov sigmoid controller needs num_inputs=2 and num_outputs=1")
+                 *, tau_s: float = 0.01, use_fused: bool = True, observe: tuple[int, ...] = (X, THETA),
+                 limits: tuple[float, ...] | None = None, bang_bang: bool = False) -> None:
+        if config.num_inputs != len(observe) or config.num_outputs != 1:
+            raise ValueError(f"this sigmoid controller needs num_inputs={len(observe)} and num_outputs=1, got "
+                             f"{config.num_inputs} and {config.num_outputs}")
         self.cfg, self.spec, self.plant, self.tau_s = config, spec, plant, tau_s
+        self.observe, self.bang_bang = tuple(observe), bang_bang
+        self.limits = (plant.x_limit, plant.theta_limit) if limits is None else tuple(limits)
         N = genomes.num_nodes
         self.w = genomes.effective_weight().reshape(-1, N, N)
         self.values = torch.zeros(self.w.shape[0], N, dtype=self.w.dtype, device=self.w.device)
@@ -179,7 +209,8 @@ class SigmoidPolicy:
         cfg = self.cfg
         return sigmoid_loop(self.w, state0, num_inputs=cfg.num_inputs, first_output=cfg.first_output,
                             max_steps=max_steps, updates=self.spec.updates_per_step, slope=NEAT_SIGMOID_SLOPE,
-                            tau_s=self.tau_s, plant=self.plant)
+                            tau_s=self.tau_s, plant=self.plant, observe=self.observe, limits=self.limits,
+                            bang_bang=self.bang_bang)
 
     def keep(self, rows: Tensor) -> None:
         self.w, self.values = self.w[rows], self.values[rows]
@@ -187,18 +218,103 @@ class SigmoidPolicy:
     def act(self, plant_state: Tensor) -> tuple[Tensor, Tensor]:
         cfg = self.cfg
         self.stepped = True
-        inputs = normalized_inputs(plant_state, self.plant).to(self.w.dtype)
+        inputs = normalized_inputs(plant_state, self.plant, self.observe, self.limits).to(self.w.dtype)
         y = self.values
         for _ in range(self.spec.updates_per_step):
             y = y.clone()
             y[:, : cfg.num_inputs] = inputs
             y[:, cfg.num_inputs : cfg.first_output] = 1.0
-            y = torch.sigmoid(NEAT_SIGMOID_SLOPE * (y.unsqueeze(1) @ self.w).squeeze(1))
+            y = _sigmoid(NEAT_SIGMOID_SLOPE * (y.unsqueeze(1) @ self.w).squeeze(1))
             y[:, : cfg.num_inputs] = inputs
             y[:, cfg.num_inputs : cfg.first_output] = 1.0
         self.values = y
         out = y[:, cfg.first_output]
+        if self.bang_bang:
+            return torch.where(out > 0.5, 10.0, -10.0).to(out.dtype), y
         return 10.0 * (2.0 * out - 1.0), y
+
+
+# Markov task (Table I): all four state variables. The paper gives no bounds for the
+# velocities; these cover what a balancing cart-pole reaches (values beyond are clamped).
+MARKOV_OBSERVE = (X, X_DOT, THETA, THETA_DOT)
+X_DOT_LIMIT = 1.5  # m/s
+THETA_DOT_LIMIT = 2.0  # rad/s
+
+
+def markov_limits(plant: CartPoleParams) -> tuple[float, float, float, float]:
+    """Normalisation bounds of (x, x_dot, theta, theta_dot): failure limits and the velocity bounds."""
+    return (plant.x_limit, X_DOT_LIMIT, plant.theta_limit, THETA_DOT_LIMIT)
+
+
+@dataclass(frozen=True)
+class MarkovSpikingSpec:
+    """The Markov spiking controller's free choices (the paper gives none of these values)."""
+
+    neuron: IzhikevichParams = QIU2019
+    dt_ms: float = 0.5  # as SpikingSpec
+    i_background: float = 5.0  # mV/ms (nA), as SpikingSpec: ~40 Hz alone
+    # [Qiu19] "the normalized input variables are encoded as a probability to generate a spike"
+    # at each time step: here each 0.5 ms substep, at up to 1000 Hz (probability 0.5 at input 1).
+    input_rate_max_hz: float = 1000.0
+    synapse_kick_mv: float = 1.0  # as SpikingSpec
+    rate_window_steps: int = 1  # the output neuron's rate over the last control step (20 ms)
+    # F = +10 N above this output rate, -10 N below: the rate of a neuron with background
+    # current only (40 Hz at 5 nA), so an output neuron with no net input sits on the boundary.
+    threshold_hz: float = 40.0
+
+    def __post_init__(self) -> None:
+        check_dt(self.dt_ms)
+        for name in ("i_background", "input_rate_max_hz", "synapse_kick_mv", "threshold_hz"):
+            value = getattr(self, name)
+            if not math.isfinite(value) or value < 0:
+                raise ValueError(f"MarkovSpikingSpec.{name} must be finite and >= 0, got {value!r}")
+        if not 1 <= self.rate_window_steps <= MAX_WINDOW:
+            raise ValueError(f"MarkovSpikingSpec.rate_window_steps must be in 1..{MAX_WINDOW}, "
+                             f"got {self.rate_window_steps}")
+        if self.input_rate_max_hz * self.dt_ms / 1000.0 > 1.0:
+            raise ValueError("MarkovSpikingSpec.input_rate_max_hz * dt_ms must be at most one spike per substep")
+
+
+class MarkovSpikingPolicy:
+    """NEAT-SNN for the Markov task: Bernoulli-coded input spikes, bang-bang output.
+
+    Input nodes 0..3 are spike sources, not neurons: in every substep input k fires with
+    probability ``norm_k * input_rate_max_hz * dt``, from a counter-based random stream keyed
+    by a hash of the genome (so a genome's episode is the same in any batch). Runs in the
+    closed-loop C kernel only (CPU); there is no per-step torch path to record from.
+    """
+
+    def __init__(self, genomes: Genomes, config: NEATConfig, spec: MarkovSpikingSpec, tau_s: float,
+                 plant: CartPoleParams) -> None:
+        if config.num_inputs != 4 or config.num_outputs != 1:
+            raise ValueError("the Markov spiking controller needs num_inputs=4 and num_outputs=1, got "
+                             f"{config.num_inputs} and {config.num_outputs}")
+        w = genomes.effective_weight()
+        if not (plant_state_ok(w) and loop_available()):
+            raise RuntimeError("the Markov spiking controller runs in the closed-loop C kernel: it needs CPU "
+                               "float32/float64 genomes and a C compiler")
+        self.cfg, self.spec, self.plant, self.tau_s = config, spec, plant, tau_s
+        N = genomes.num_nodes
+        flat = w.reshape(-1, N, N)
+        self.keys = genome_keys(flat)  # before compaction: the same genome, the same key, in any batch
+        self.nodes = torch.nonzero(genomes.node.reshape(-1, N).any(0)).flatten()
+        self.w = flat[:, self.nodes][:, :, self.nodes] * (spec.synapse_kick_mv / spec.dt_ms)
+        self.out = int(torch.nonzero(self.nodes == config.first_output).flatten()[0])
+        self.substeps = int(round(tau_s * 1000.0 / spec.dt_ms))
+        if abs(self.substeps * spec.dt_ms - tau_s * 1000.0) > 1e-9:
+            raise ValueError(f"tau ({tau_s * 1000} ms) must be a whole number of dt_ms ({spec.dt_ms} ms)")
+
+    def run_fused(self, state0: Tensor, max_steps: int) -> Tensor:
+        spec = self.spec
+        return markov_spiking_loop(
+            self.w, self.keys, state0, num_inputs=self.cfg.num_inputs, output=self.out, max_steps=max_steps,
+            substeps=self.substeps, window=spec.rate_window_steps, dt_ms=spec.dt_ms, neuron=spec.neuron,
+            i_background=spec.i_background, spike_prob_max=spec.input_rate_max_hz * spec.dt_ms / 1000.0,
+            threshold_hz=spec.threshold_hz, window_s=self.tau_s, tau_s=self.tau_s, plant=self.plant,
+            observe=MARKOV_OBSERVE, limits=markov_limits(self.plant))
+
+    def act(self, plant_state: Tensor):
+        raise NotImplementedError("MarkovSpikingPolicy runs whole episodes in C (closed_loop without record)")
 
 
 def plant_state_ok(w: Tensor) -> bool:

@@ -20,7 +20,7 @@ from snn_torch._cbuild import load_c_library
 from snn_torch.functional.fused_cpu import MAX_NODES, ROW_SOURCE
 from tasks.cartpole import CartPoleParams, PlantError
 
-__all__ = ["loop_available", "spiking_loop", "sigmoid_loop"]
+__all__ = ["loop_available", "spiking_loop", "sigmoid_loop", "markov_spiking_loop", "genome_keys"]
 
 _LOOP_SOURCE = r"""
 #define DEFINE_PLANT(NAME, T)                                                                  \
@@ -85,18 +85,20 @@ DEFINE_SNN_LOOP(snn_loop_f32, izh_f32_row, plant_f32, float, sinf, cosf, expf)
 DEFINE_SNN_LOOP(snn_loop_f64, izh_f64_row, plant_f64, double, sin, cos, exp)
 
 #define DEFINE_SIG_LOOP(NAME, PLANT, T, EXP)                                                   \
+/* inputs: state variables obs[k] scaled by lim[k] to [0, 1]; bang: F = +-10 N on y > 0.5 */   \
 void NAME(const T *w, const T *state0, int64_t *steps, int64_t *status, int64_t rows,          \
           int64_t n, int64_t n_in, int64_t first_out, int64_t max_steps, int64_t updates,      \
-          T slope, T tau, T g, T total, T mp, T mpl, T l, T xlim, T thlim, int threads) {                \
+          const int64_t *obs, const T *lim, int64_t bang,                                      \
+          T slope, T tau, T g, T total, T mp, T mpl, T l, T xlim, T thlim, int threads) {      \
     _Pragma("omp parallel for schedule(dynamic, 4) num_threads(threads)")                      \
     for (int64_t r = 0; r < rows; ++r) {                                                       \
-        T y[MAXN], yn[MAXN];                                                                   \
+        T y[MAXN], yn[MAXN], in[8];                                                            \
         const T *W = w + r * n * n;                                                            \
         T s[4] = {state0[4 * r], state0[4 * r + 1], state0[4 * r + 2], state0[4 * r + 3]};      \
         for (int64_t j = 0; j < n; ++j) y[j] = 0;                                              \
         int64_t t = 0; status[r] = 0;                                                          \
         for (; t < max_steps; ++t) {                                                           \
-            T in[2] = {NORM(T, s[0], xlim), NORM(T, s[2], thlim)};                             \
+            for (int64_t k = 0; k < n_in; ++k) in[k] = NORM(T, s[obs[k]], lim[k]);             \
             for (int64_t k = 0; k < updates; ++k) {                                            \
                 for (int64_t j = 0; j < n_in; ++j) y[j] = in[j];                               \
                 for (int64_t j = n_in; j < first_out; ++j) y[j] = 1;                           \
@@ -109,8 +111,9 @@ void NAME(const T *w, const T *state0, int64_t *steps, int64_t *status, int64_t 
                 for (int64_t j = 0; j < n_in; ++j) y[j] = in[j];                               \
                 for (int64_t j = n_in; j < first_out; ++j) y[j] = 1;                           \
             }                                                                                  \
-            T force = (T)10.0 * ((T)2.0 * y[first_out] - (T)1.0);                              \
-            PLANT(s, force, tau, g, total, mp, mpl, l);                                                \
+            T force = bang ? (y[first_out] > (T)0.5 ? (T)10.0 : (T)-10.0)                      \
+                           : (T)10.0 * ((T)2.0 * y[first_out] - (T)1.0);                       \
+            PLANT(s, force, tau, g, total, mp, mpl, l);                                        \
             if (!(isfinite(s[0]) && isfinite(s[1]) && isfinite(s[2]) && isfinite(s[3]))) {     \
                 status[r] = 1; break;                                                          \
             }                                                                                  \
@@ -121,6 +124,69 @@ void NAME(const T *w, const T *state0, int64_t *steps, int64_t *status, int64_t 
 }
 DEFINE_SIG_LOOP(sig_loop_f32, plant_f32, float, expf)
 DEFINE_SIG_LOOP(sig_loop_f64, plant_f64, double, exp)
+
+/* Counter-based random numbers (splitmix64): a row's stream depends on its key alone. */
+static inline uint64_t mix64(uint64_t x) {
+    x += 0x9E3779B97F4A7C15ULL;
+    x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
+    return x ^ (x >> 31);
+}
+static inline double uniform01(uint64_t key, uint64_t counter) {
+    return (double)(mix64(key ^ mix64(counter)) >> 11) * 0x1.0p-53;
+}
+/* FNV-1a over a row's bytes: a key that is a pure function of the genome. */
+void row_keys(const unsigned char *data, int64_t rows, int64_t bytes_per_row, uint64_t *keys) {
+    for (int64_t r = 0; r < rows; ++r) {
+        uint64_t h = 0xcbf29ce484222325ULL;
+        const unsigned char *p = data + r * bytes_per_row;
+        for (int64_t k = 0; k < bytes_per_row; ++k) { h ^= p[k]; h *= 0x100000001b3ULL; }
+        keys[r] = mix64(h);
+    }
+}
+
+/* Markov task: n_in Bernoulli input nodes fire in each substep with probability norm * pmax;
+   F = +10 N when the output neuron's rate over the window exceeds thr_hz, else -10 N. */
+#define DEFINE_MARKOV_LOOP(NAME, SUBSTEP, PLANT, T)                                            \
+void NAME(const T *w, const uint64_t *keys, const T *state0, int64_t *steps, int64_t *status,  \
+          int64_t rows, int64_t n, int64_t n_in, int64_t out, int64_t max_steps,               \
+          int64_t substeps, int64_t window, const int64_t *obs, const T *lim,                   \
+          T dt, T a, T b, T c, T d, T vpeak, T ibg, T pmax, T thr_hz, T window_s,              \
+          T tau, T g, T total, T mp, T mpl, T l, T xlim, T thlim, int threads) {               \
+    _Pragma("omp parallel for schedule(dynamic, 4) num_threads(threads)")                      \
+    for (int64_t r = 0; r < rows; ++r) {                                                       \
+        T vv[MAXN], uu[MAXN], zz[MAXN], I[MAXN], cnt[MAXN], hist[16], p[8];                   \
+        const T *W = w + r * n * n;                                                            \
+        T s[4] = {state0[4 * r], state0[4 * r + 1], state0[4 * r + 2], state0[4 * r + 3]};      \
+        for (int64_t j = 0; j < n; ++j) { vv[j] = (T)-65.0; uu[j] = b * vv[j]; zz[j] = 0; I[j] = ibg; } \
+        for (int64_t k = 0; k < window; ++k) hist[k] = 0;                                      \
+        uint64_t counter = 0;                                                                  \
+        int64_t t = 0; status[r] = 0;                                                          \
+        for (; t < max_steps; ++t) {                                                           \
+            for (int64_t k = 0; k < n_in; ++k) p[k] = NORM(T, s[obs[k]], lim[k]) * pmax;       \
+            cnt[out] = 0;                                                                      \
+            for (int64_t q = 0; q < substeps; ++q) {                                           \
+                for (int64_t k = 0; k < n_in; ++k)                                             \
+                    zz[k] = uniform01(keys[r], counter++) < (double)p[k] ? (T)1 : (T)0;        \
+                SUBSTEP(vv, uu, zz, W, I, cnt, n, n_in, dt, a, b, c, d, vpeak);                \
+            }                                                                                  \
+            hist[t % window] = cnt[out];                                                       \
+            int64_t in_window = t + 1 < window ? t + 1 : window;                               \
+            T sum = hist[0];                                                                   \
+            for (int64_t k = 1; k < window; ++k) sum += hist[k];                               \
+            T rate = sum / (T)((double)in_window * (double)window_s);                          \
+            T force = rate > thr_hz ? (T)10.0 : (T)-10.0;                                      \
+            PLANT(s, force, tau, g, total, mp, mpl, l);                                        \
+            if (!(isfinite(s[0]) && isfinite(s[1]) && isfinite(s[2]) && isfinite(s[3]))) {     \
+                status[r] = 1; break;                                                          \
+            }                                                                                  \
+            if (fabs((double)s[0]) > (double)xlim || fabs((double)s[2]) > (double)thlim) break; \
+        }                                                                                      \
+        steps[r] = t;                                                                          \
+    }                                                                                          \
+}
+DEFINE_MARKOV_LOOP(markov_loop_f32, izh_f32_substep, plant_f32, float)
+DEFINE_MARKOV_LOOP(markov_loop_f64, izh_f64_substep, plant_f64, double)
 """
 
 MAX_WINDOW = 16
@@ -138,7 +204,14 @@ def loop_available() -> bool:
             snn.argtypes = [ctypes.c_void_p] * 6 + [ctypes.c_int64] * 5 + [ct] * 17 + [ctypes.c_int]
             sig = getattr(_lib, f"sig_loop_{suffix}")
             sig.restype = None
-            sig.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int64] * 6 + [ct] * 9 + [ctypes.c_int]
+            sig.argtypes = ([ctypes.c_void_p] * 4 + [ctypes.c_int64] * 6 + [ctypes.c_void_p] * 2 + [ctypes.c_int64]
+                            + [ct] * 9 + [ctypes.c_int])
+            mk = getattr(_lib, f"markov_loop_{suffix}")
+            mk.restype = None
+            mk.argtypes = ([ctypes.c_void_p] * 5 + [ctypes.c_int64] * 7 + [ctypes.c_void_p] * 2 + [ct] * 18
+                           + [ctypes.c_int])
+        _lib.row_keys.restype = None
+        _lib.row_keys.argtypes = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_int64, ctypes.c_void_p]
         _lib._typed = True
     return _lib is not None
 
@@ -177,18 +250,64 @@ def spiking_loop(w: Tensor, w_out: Tensor, sigma: Tensor, state0: Tensor, *, max
     return _finish(steps, status)
 
 
+def _observation(obs: tuple[int, ...], limits: tuple[float, ...], dtype: torch.dtype) -> tuple[Tensor, Tensor]:
+    if len(obs) != len(limits) or not 1 <= len(obs) <= 8:
+        raise ValueError(f"need 1 to 8 observed variables with one limit each, got {obs} and {limits}")
+    return torch.tensor(obs, dtype=torch.int64), torch.tensor(limits, dtype=dtype)
+
+
 def sigmoid_loop(w: Tensor, state0: Tensor, *, num_inputs: int, first_output: int, max_steps: int, updates: int,
-                 slope: float, tau_s: float, plant: CartPoleParams) -> Tensor:
-    """Steps balanced per row for the non-Markov sigmoid controller (see ``SigmoidPolicy``)."""
+                 slope: float, tau_s: float, plant: CartPoleParams, observe: tuple[int, ...] = (0, 2),
+                 limits: tuple[float, ...] | None = None, bang_bang: bool = False) -> Tensor:
+    """Steps balanced per row for a recurrent sigmoid controller (see ``SigmoidPolicy``):
+    inputs are the state variables ``observe`` scaled from ``[-limit, limit]`` to [0, 1]."""
     B, N = w.shape[0], w.shape[-1]
     if N > MAX_NODES:
         raise ValueError(f"the fused loop handles N <= {MAX_NODES}, got {N}")
     dtype = w.dtype
+    limits = (plant.x_limit, plant.theta_limit) if limits is None else limits
+    obs, lim = _observation(observe, limits, dtype)
+    if len(observe) != num_inputs:
+        raise ValueError(f"num_inputs ({num_inputs}) must equal the observed variables ({len(observe)})")
     w = w.contiguous()
     s0 = state0.to(dtype).contiguous()
     steps = torch.empty(B, dtype=torch.int64)
     status = torch.empty(B, dtype=torch.int64)
     fn = _lib.sig_loop_f32 if dtype == torch.float32 else _lib.sig_loop_f64
     fn(w.data_ptr(), s0.data_ptr(), steps.data_ptr(), status.data_ptr(), B, N, int(num_inputs), int(first_output),
-       int(max_steps), int(updates), float(slope), float(tau_s), *_plant_args(plant), torch.get_num_threads())
+       int(max_steps), int(updates), obs.data_ptr(), lim.data_ptr(), int(bang_bang), float(slope), float(tau_s),
+       *_plant_args(plant), torch.get_num_threads())
+    return _finish(steps, status)
+
+
+def genome_keys(flat: Tensor) -> Tensor:
+    """A 64-bit key per row of ``flat`` ([B, ...], any dtype): a hash of the row's bytes, so
+    a genome's noise depends on the genome alone (not its batch, run or position)."""
+    data = flat.contiguous().reshape(flat.shape[0], -1)
+    raw = data.view(torch.uint8) if data.dtype != torch.uint8 else data
+    keys = torch.empty(flat.shape[0], dtype=torch.int64)
+    _lib.row_keys(raw.data_ptr(), raw.shape[0], raw.shape[1], keys.data_ptr())
+    return keys
+
+
+def markov_spiking_loop(w: Tensor, keys: Tensor, state0: Tensor, *, num_inputs: int, output: int, max_steps: int,
+                        substeps: int, window: int, dt_ms: float, neuron, i_background: float,
+                        spike_prob_max: float, threshold_hz: float, window_s: float, tau_s: float,
+                        plant: CartPoleParams, observe: tuple[int, ...], limits: tuple[float, ...]) -> Tensor:
+    """Steps balanced per row for the Markov spiking controller (see ``MarkovSpikingPolicy``)."""
+    B, N = w.shape[0], w.shape[-1]
+    if N > MAX_NODES or window > MAX_WINDOW:
+        raise ValueError(f"the fused loop handles N <= {MAX_NODES} and windows <= {MAX_WINDOW}, got {N}, {window}")
+    dtype = w.dtype
+    obs, lim = _observation(observe, limits, dtype)
+    w, keys = w.contiguous(), keys.contiguous()
+    s0 = state0.to(dtype).contiguous()
+    steps = torch.empty(B, dtype=torch.int64)
+    status = torch.empty(B, dtype=torch.int64)
+    fn = _lib.markov_loop_f32 if dtype == torch.float32 else _lib.markov_loop_f64
+    fn(w.data_ptr(), keys.data_ptr(), s0.data_ptr(), steps.data_ptr(), status.data_ptr(), B, N, int(num_inputs),
+       int(output), int(max_steps), int(substeps), int(window), obs.data_ptr(), lim.data_ptr(), float(dt_ms),
+       float(neuron.a), float(neuron.b), float(neuron.c), float(neuron.d), float(neuron.v_peak), float(i_background),
+       float(spike_prob_max), float(threshold_hz), float(window_s), float(tau_s), *_plant_args(plant),
+       torch.get_num_threads())
     return _finish(steps, status)

@@ -1,46 +1,77 @@
-"""Figures for the cart-pole experiments: fitness progress (the paper's Fig. 8), trajectories
-(Figs. 3, 4, 6, 7), a champion's topology (Fig. 5) and a spike raster.
+"""Figures for the cart-pole experiments and the notebooks: fitness progress (the paper's
+Fig. 8), trajectories (Figs. 3, 4, 6, 7), a champion's topology (Fig. 5), spike rasters,
+species sizes, a cart-pole animation and a training-loss curve.
 
-Every function returns a ``matplotlib.figure.Figure`` built without pyplot, so it works
-headless (Agg) and inline in notebooks; ``snn_torch.plots.save_figure`` writes it atomically.
+Every function returns a ``matplotlib.figure.Figure`` (``animate_cartpole`` a
+``FuncAnimation``) built without pyplot, so it works headless (Agg) and inline in notebooks;
+``snn_torch.plots.save_figure`` writes a figure atomically. ``EvolutionHistory`` is a NEAT
+reporter that records what the progress plots draw, one generation at a time.
 """
 
 from __future__ import annotations
 
+import warnings
+from typing import TYPE_CHECKING
+
 import networkx as nx
 import numpy as np
+from matplotlib import colormaps
+from matplotlib.animation import FuncAnimation
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Rectangle
+from matplotlib.ticker import MaxNLocator
 from torch import Tensor
 
 from evolution.config import NEATConfig
 from evolution.genome_io import to_networkx
 from evolution.population import Genomes
+from evolution.reporters import BaseReporter
+from tasks.cartpole import DEFAULT_PLANT, CartPoleParams
 
-__all__ = ["plot_fitness_progress", "plot_trajectory", "plot_topology", "plot_raster"]
+if TYPE_CHECKING:
+    from evolution.neat import NEAT
+
+__all__ = ["plot_best_fitness_mean_std", "plot_trajectory", "plot_topology", "plot_raster",
+           "plot_episode", "plot_species_sizes", "plot_evolution_progress", "plot_training_curve",
+           "animate_cartpole", "EvolutionHistory"]
 
 
-def plot_fitness_progress(best: dict[str, Tensor], *, max_fitness: float | None = None,
-                          title: str = "Best fitness per generation") -> Figure:
-    """Mean and standard deviation over runs of the best fitness per generation.
+def _numpy(values) -> np.ndarray:
+    """A float64 numpy array from a tensor, array or list."""
+    if isinstance(values, Tensor):
+        return values.detach().double().cpu().numpy()
+    return np.asarray(values, dtype=np.float64)
 
-    ``best[label]`` is ``[generations, runs]`` (NaN after a run stopped: a solved run keeps
-    its final value, the usual convention for such plots, so pass it filled forward).
+
+def plot_best_fitness_mean_std(curves: dict[str, Tensor | np.ndarray], *, max_fitness: float | None = None,
+                               title: str = "") -> Figure:
+    """The paper's Fig. 8: best fitness per generation, mean +- standard deviation over runs.
+
+    ``curves[label]`` is ``[runs, generations]``: each run's best fitness per generation.
+    NaN entries (a run that stopped early) are left out of that generation's mean and
+    standard deviation; fill a solved run forward if it should count at its final value.
     """
     fig = Figure(figsize=(7, 4.2), layout="constrained")
     ax = fig.subplots()
-    for label, values in best.items():
-        v = values.double().cpu().numpy()
-        mean, std = np.nanmean(v, axis=1), np.nanstd(v, axis=1)
-        gens = np.arange(1, len(mean) + 1)
-        ax.plot(gens, mean, label=f"{label} (mean of {v.shape[1]} runs)")
-        ax.fill_between(gens, mean - std, mean + std, alpha=0.2)
+    for label, values in curves.items():
+        v = _numpy(values)
+        if v.ndim != 2:
+            raise ValueError(f"curves[{label!r}] must be [runs, generations], got shape {v.shape}")
+        with warnings.catch_warnings():  # generations no run reached are NaN, and stay out of the plot
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mean, std = np.nanmean(v, axis=0), np.nanstd(v, axis=0)
+        gens = np.arange(1, v.shape[1] + 1)
+        (line,) = ax.plot(gens, mean, label=f"{label} (mean ± std, {v.shape[0]} runs)")
+        ax.fill_between(gens, mean - std, mean + std, color=line.get_color(), alpha=0.2, lw=0)
     if max_fitness is not None:
-        ax.axhline(max_fitness, color="grey", lw=0.8, ls="--", label="success")
+        ax.axhline(max_fitness, color="grey", lw=0.8, ls="--", label=f"success ({max_fitness:g} steps)")
     ax.set_xlabel("generation")
-    ax.set_ylabel("best fitness (time steps balanced)")
-    ax.set_title(title)
+    ax.set_ylabel("best fitness (control steps balanced)")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_title(title or "Best fitness per generation")
     ax.grid(alpha=0.3)
-    ax.legend()
+    ax.legend(loc="best")
     return fig
 
 
@@ -114,21 +145,234 @@ def plot_topology(genomes: Genomes, config: NEATConfig, run: int = 0, index: int
             arrows=True, arrowsize=12, node_size=600, connectionstyle="arc3,rad=0.15")
     ax.set_title(title or f"run {run}, genome {index}: {graph.number_of_nodes()} nodes, "
                  f"{graph.number_of_edges()} connections, sigma {graph.graph['sigma']:.3g}")
+    ax.legend(handles=[Line2D([], [], color="tab:red", lw=2, label="excitatory (w > 0)"),
+                       Line2D([], [], color="tab:blue", lw=2, label="inhibitory (w < 0)"),
+                       Line2D([], [], color="grey", lw=1.5, ls="--", label="disabled"),
+                       Line2D([], [], color="grey", lw=0.5, label=f"width ∝ |w| (max {w_max:.3g})")],
+              loc="lower center", bbox_to_anchor=(0.5, -0.02), ncols=4, fontsize=7, frameon=False)
+    ax.margins(0.15)
     ax.set_axis_off()
     return fig
 
 
-def plot_raster(activity: Tensor, *, tau_s: float, names: list[str] | None = None, title: str = "") -> Figure:
-    """Spike counts per control step ``[T, N]`` as a raster (one row per neuron)."""
-    a = activity.detach().cpu().numpy()
-    fig = Figure(figsize=(7, 0.35 * a.shape[1] + 1.2), layout="constrained")
-    ax = fig.subplots()
-    t = np.arange(1, a.shape[0] + 1) * tau_s
+def _draw_raster(ax, a: np.ndarray, t: np.ndarray, names: list[str] | None) -> None:
+    """One row per neuron, a tick per bin with spikes; the tick thickens with the count (up to 4)."""
     for n in range(a.shape[1]):
         hit = a[:, n] > 0
-        ax.scatter(t[hit], np.full(hit.sum(), n), s=2 + 4 * np.minimum(a[hit, n], 4), marker="|", color="black")
-    ax.set_yticks(range(a.shape[1]), names or [str(n) for n in range(a.shape[1])])
-    ax.set_xlabel("time (s)")
+        ax.vlines(t[hit], n - 0.4, n + 0.4, color="black", linewidths=0.8 + 0.6 * (np.minimum(a[hit, n], 4) - 1))
+    labels = names or [str(n) for n in range(a.shape[1])]
+    step = max(1, a.shape[1] // 16)  # at most ~16 tick labels, so they stay readable
+    ax.set_yticks(range(0, a.shape[1], step), labels[::step])
+    ax.set_ylim(-0.7, a.shape[1] - 0.3)
+    ax.invert_yaxis()
     ax.set_ylabel("neuron")
-    ax.set_title(title or "spikes per control step")
+
+
+def plot_raster(activity: Tensor, *, tau_s: float, names: list[str] | None = None, title: str = "",
+                time_unit: str = "s") -> Figure:
+    """Spike counts per time bin ``[T, N]`` (a control step of ``tau_s`` seconds) as a raster,
+    one row per neuron; ``time_unit`` ``"s"`` or ``"ms"`` for the time axis."""
+    if time_unit not in ("s", "ms"):
+        raise ValueError(f"time_unit must be 's' or 'ms', got {time_unit!r}")
+    a = _numpy(activity)
+    fig = Figure(figsize=(7, min(0.3 * a.shape[1], 4.5) + 1.2), layout="constrained")
+    ax = fig.subplots()
+    t = np.arange(1, a.shape[0] + 1) * tau_s * (1000.0 if time_unit == "ms" else 1.0)
+    _draw_raster(ax, a, t, names)
+    ax.set_xlim(0, t[-1] if len(t) else 1)
+    ax.set_xlabel(f"time ({time_unit})")
+    ax.set_title(title or "spikes per time bin")
     return fig
+
+
+def plot_episode(activity: Tensor, x_m: Tensor, theta_rad: Tensor, force_n: Tensor, *, tau_s: float,
+                 names: list[str] | None = None, title: str = "") -> Figure:
+    """A controller's episode: spike raster ``[T, N]`` above cart position (m), pole angle
+    (deg) and force (N), all against time (s) on one shared axis."""
+    a = _numpy(activity)
+    raster_h = min(0.3 * a.shape[1], 4.0) + 0.6
+    fig = Figure(figsize=(8, raster_h + 4.8), layout="constrained")
+    axes = fig.subplots(4, 1, sharex=True, height_ratios=[raster_h, 1.4, 1.4, 1.4])
+    t = np.arange(1, a.shape[0] + 1) * tau_s
+    # Neurons fire several times per control step, so ticks would merge into bars: show the
+    # spike count of each neuron in each step as a shade instead.
+    im = axes[0].imshow(a.T, aspect="auto", interpolation="nearest", cmap="Greys", vmin=0,
+                        vmax=max(float(a.max()) if a.size else 1.0, 1.0),
+                        extent=(0.0, len(t) * tau_s, a.shape[1] - 0.5, -0.5))
+    labels = names or [str(n) for n in range(a.shape[1])]
+    step = max(1, a.shape[1] // 16)
+    axes[0].set_yticks(range(0, a.shape[1], step), labels[::step])
+    axes[0].set_ylabel("neuron")
+    fig.colorbar(im, ax=axes[0], location="top", shrink=0.35, aspect=25, pad=0.02,
+                 label=f"spikes per control step ({tau_s * 1000:g} ms)")
+    fig.suptitle(title or "one episode: spikes and the cart-pole")
+    axes[1].plot(t, _numpy(x_m), color="tab:blue", lw=0.8)
+    axes[1].set_ylabel("x (m)")
+    axes[2].plot(t, np.degrees(_numpy(theta_rad)), color="tab:orange", lw=0.8)
+    axes[2].set_ylabel("θ (deg)")
+    axes[3].plot(t, _numpy(force_n), color="tab:green", lw=0.5)
+    axes[3].set_ylabel("F (N)")
+    axes[3].set_xlabel("time (s)")
+    axes[3].set_xlim(0, t[-1] if len(t) else 1)
+    for ax in axes[1:]:
+        ax.grid(alpha=0.3)
+    return fig
+
+
+def _draw_species(ax, sizes: np.ndarray) -> None:
+    gens = np.arange(1, sizes.shape[0] + 1)
+    if sizes.shape[1]:
+        # tab20's dark shades first, then its light ones: neighbouring bands never share a hue
+        # until more than 20 species have lived.
+        colours = [colormaps["tab20"]((2 * k) % 20 + (k // 10) % 2) for k in range(sizes.shape[1])]
+        ax.stackplot(gens, sizes.T, colors=colours, alpha=0.9, lw=0.3, edgecolor="white")
+    ax.set_xlabel("generation")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_ylabel("genomes per species")
+    ax.set_xlim(gens[0], max(gens[-1], gens[0] + 1) if len(gens) else 2)
+    ax.set_ylim(0, sizes.sum(1).max() if sizes.size else 1)
+
+
+def plot_species_sizes(sizes: Tensor | np.ndarray, *, title: str = "") -> Figure:
+    """Species sizes per generation as a stacked area: ``sizes[generation, species]`` genomes
+    (0 before a species appears and after it dies); one colour per species."""
+    s = _numpy(sizes)
+    if s.ndim != 2:
+        raise ValueError(f"sizes must be [generations, species], got shape {s.shape}")
+    fig = Figure(figsize=(7, 3.5), layout="constrained")
+    ax = fig.subplots()
+    _draw_species(ax, s)
+    ax.set_title(title or f"species sizes ({s.shape[1]} species so far)")
+    return fig
+
+
+def plot_evolution_progress(best: Tensor | np.ndarray, mean: Tensor | np.ndarray, sizes: Tensor | np.ndarray, *,
+                            max_fitness: float | None = None, title: str = "") -> Figure:
+    """One run's progress: best and mean fitness per generation above species sizes as a
+    stacked area (``sizes[generation, species]``). Redraw it each generation for a live plot."""
+    b, m, s = _numpy(best), _numpy(mean), _numpy(sizes)
+    fig = Figure(figsize=(7, 5.5), layout="constrained")
+    ax_f, ax_s = fig.subplots(2, 1, sharex=True, height_ratios=[3, 2])
+    gens = np.arange(1, len(b) + 1)
+    ax_f.plot(gens, b, marker=".", color="tab:red", label="best")
+    ax_f.plot(gens, m, marker=".", color="tab:blue", label="mean")
+    if max_fitness is not None:
+        ax_f.axhline(max_fitness, color="grey", lw=0.8, ls="--", label=f"target ({max_fitness:g} steps)")
+    ax_f.set_ylabel("fitness (control steps balanced)")
+    ax_f.set_ylim(bottom=0)
+    ax_f.grid(alpha=0.3)
+    ax_f.legend(loc="upper left")
+    if not title and len(b):
+        title = f"generation {len(b)}: best {b[-1]:g}, mean {m[-1]:.4g}"
+    ax_f.set_title(title)
+    _draw_species(ax_s, s)
+    ax_s.set_title(f"species sizes ({s.shape[1]} species so far)", fontsize="medium")
+    return fig
+
+
+def plot_training_curve(losses, *, accuracy=None, title: str = "") -> Figure:
+    """Loss per training step and, if given, accuracy (fraction correct) on a second axis."""
+    loss = _numpy(losses)
+    fig = Figure(figsize=(7, 3.8), layout="constrained")
+    ax = fig.subplots()
+    steps = np.arange(1, len(loss) + 1)
+    handles = ax.plot(steps, loss, color="tab:blue", label="loss")
+    ax.set_xlabel("training step")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_ylabel("loss (cross-entropy, nats)")
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    if accuracy is not None:
+        ax_acc = ax.twinx()
+        handles += ax_acc.plot(steps, _numpy(accuracy), color="tab:orange", label="accuracy")
+        ax_acc.set_ylabel("accuracy (fraction correct)")
+        ax_acc.set_ylim(0, 1.02)
+    ax.legend(handles=handles, loc="center right")
+    ax.set_title(title or "training")
+    return fig
+
+
+def animate_cartpole(x_m: Tensor | np.ndarray, theta_rad: Tensor | np.ndarray, tau_s: float, *,
+                     force_n: Tensor | np.ndarray | None = None, plant: CartPoleParams = DEFAULT_PLANT,
+                     every: int = 1, title: str = "", dpi: int = 72) -> FuncAnimation:
+    """The cart-pole moving: one frame per ``every`` control steps, played in real time.
+
+    ``x_m[T]``, ``theta_rad[T]`` (and ``force_n[T]``, drawn as an arrow) are the state after
+    each control step of ``tau_s`` seconds. In a notebook show it with
+    ``IPython.display.HTML(anim.to_jshtml())`` (no ffmpeg needed).
+    """
+    x, th = _numpy(x_m), _numpy(theta_rad)
+    f = None if force_n is None else _numpy(force_n)
+    if every < 1:
+        raise ValueError(f"every must be >= 1, got {every}")
+    frames = list(range(0, len(x), every)) or [0]
+    pole = 2.0 * plant.half_length
+    fig = Figure(figsize=(7, 2.8), dpi=dpi, layout="constrained")
+    ax = fig.subplots()
+    lim = plant.x_limit
+    ax.set_xlim(-lim - 0.3, lim + 0.3)
+    cart_w, cart_h = 0.4, 0.2
+    ax.set_ylim(-0.25, cart_h + pole + 0.25)
+    ax.set_aspect("equal")
+    ax.axhline(0.0, color="black", lw=1.0)
+    for edge in (-lim, lim):
+        ax.axvline(edge, color="tab:red", lw=1.0, ls="--")
+    ax.set_xlabel("cart position x (m)")
+    ax.set_yticks([])
+    cart = Rectangle((0, 0), cart_w, cart_h, facecolor="tab:blue", edgecolor="black")
+    ax.add_patch(cart)
+    (rod,) = ax.plot([], [], color="tab:orange", lw=4, solid_capstyle="round")
+    (push,) = ax.plot([], [], color="tab:green", lw=3, zorder=3, marker=">", markevery=[1], markersize=6)
+    label = ax.text(0.01, 0.97, "", transform=ax.transAxes, va="top", fontsize=9,
+                    bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8})
+    ax.set_title(title or "cart-pole")
+
+    def draw(i: int):
+        cx, a = x[i], th[i]
+        cart.set_xy((cx - cart_w / 2, 0.0))
+        top = (cx + pole * np.sin(a), cart_h + pole * np.cos(a))
+        rod.set_data([cx, top[0]], [cart_h, top[1]])
+        text = f"t = {(i + 1) * tau_s:5.2f} s   x = {cx:+.2f} m   θ = {np.degrees(a):+.1f}°"
+        if f is not None:
+            push.set_data([cx, cx + 0.06 * f[i]], [cart_h / 2, cart_h / 2])
+            push.set_marker(">" if f[i] >= 0 else "<")
+            text += f"   F = {f[i]:+.1f} N"
+        label.set_text(text)
+        return cart, rod, push, label
+
+    return FuncAnimation(fig, draw, frames=frames, interval=1000.0 * tau_s * every, blit=False)
+
+
+class EvolutionHistory(BaseReporter):
+    """A NEAT reporter recording one run's best and mean fitness and its species sizes each
+    generation, for ``plot_evolution_progress`` (species keep their run-wide number, so a
+    species is one band of the stacked area however its slot is reused)."""
+
+    def __init__(self, run: int = 0) -> None:
+        self.run = run
+        self.best: list[float] = []
+        self.mean: list[float] = []
+        self._sizes: list[dict[int, int]] = []
+
+    def post_evaluate(self, neat: NEAT, fitness: Tensor) -> None:
+        f = fitness[self.run].double().cpu()
+        self.best.append(f.max().item())
+        self.mean.append(f.mean().item())
+        slots = neat.species[self.run].cpu()
+        ident = neat.species_state.ident[self.run].cpu()
+        counts = slots.bincount(minlength=ident.numel())
+        self._sizes.append({int(ident[k]): int(c) for k, c in enumerate(counts.tolist()) if c > 0})
+
+    def species_sizes(self) -> np.ndarray:
+        """``[generations, species]`` genome counts, species in order of their number."""
+        ids = sorted({k for row in self._sizes for k in row})
+        col = {k: j for j, k in enumerate(ids)}
+        out = np.zeros((len(self._sizes), len(ids)))
+        for g, row in enumerate(self._sizes):
+            for k, c in row.items():
+                out[g, col[k]] = c
+        return out
+
+    def plot(self, *, max_fitness: float | None = None, title: str = "") -> Figure:
+        return plot_evolution_progress(self.best, self.mean, self.species_sizes(), max_fitness=max_fitness,
+                                       title=title)

@@ -46,45 +46,49 @@ static inline void NAME##_heun(T v, T u, T i, T a, T b, T h, T *vo, T *uo) {    
     *vo = v + half * (dv1 + dv2);                                                              \
     *uo = u + half * (du1 + du2);                                                              \
 }                                                                                              \
-/* substeps of one network (n neurons, weights W[pre*n+post]); adds spikes to cnt */           \
-static inline void NAME##_row(T *vv, T *uu, T *zz, const T *W, const T *I, T *cnt, int64_t n, \
-                              int64_t substeps, T dt, T a, T b, T c, T d, T vpeak) {           \
+/* One substep of one network (n neurons, weights W[pre*n+post]) for neurons j >= first      \
+   (those below are driven from outside, e.g. Bernoulli inputs); adds spikes to cnt. */        \
+static inline void NAME##_substep(T *vv, T *uu, T *zz, const T *W, const T *I, T *cnt,        \
+                                  int64_t n, int64_t first, T dt, T a, T b, T c, T d, T vpeak) {\
     T it[MAXN], v1[MAXN], u1[MAXN];                                                            \
-    for (int64_t s = 0; s < substeps; ++s) {                                                   \
-        /* synaptic input in the reference's order (k ascending); silent k add exactly 0 */    \
-        for (int64_t j = 0; j < n; ++j) it[j] = 0;                                             \
-        for (int64_t k = 0; k < n; ++k) {                                                      \
-            if (zz[k] == 0) continue;                                                          \
-            const T *Wk = W + k * n;                                                           \
-            for (int64_t j = 0; j < n; ++j) it[j] += zz[k] * Wk[j];                            \
-        }                                                                                      \
-        int any = 0;                                                                           \
-        for (int64_t j = 0; j < n; ++j) {                                                      \
-            it[j] = I[j] + it[j];                                                              \
-            NAME##_heun(vv[j], uu[j], it[j], a, b, dt, &v1[j], &u1[j]);                        \
-            any |= !(v1[j] - vpeak < 0);                                                       \
-        }                                                                                      \
-        if (!any) {                                                                            \
-            for (int64_t j = 0; j < n; ++j) { vv[j] = v1[j]; uu[j] = u1[j]; zz[j] = 0; }       \
-            continue;                                                                          \
-        }                                                                                      \
-        for (int64_t j = 0; j < n; ++j) {                                                      \
-            T x = v1[j] - vpeak;                                                               \
-            if (isnan(x)) x = 0;                                                               \
-            if (x >= 0) {                                                                      \
-                T th = (vpeak - vv[j]) / (v1[j] - vv[j]);                                      \
-                if (isnan(th)) th = 0;                                                         \
-                th = th < 0 ? 0 : (th > 1 ? 1 : th);                                           \
-                T ur = uu[j] + th * (u1[j] - uu[j]) + d;                                       \
-                T vr = (T)0 + c;                                                               \
-                NAME##_heun(vr, ur, it[j], a, b, ((T)1.0 - th) * dt, &vv[j], &uu[j]);          \
-                zz[j] = 1;                                                                     \
-                cnt[j] += 1;                                                                   \
-            } else {                                                                           \
-                vv[j] = v1[j]; uu[j] = u1[j]; zz[j] = 0;                                       \
-            }                                                                                  \
+    /* synaptic input in the reference's order (k ascending); silent k add exactly 0 */        \
+    for (int64_t j = first; j < n; ++j) it[j] = 0;                                             \
+    for (int64_t k = 0; k < n; ++k) {                                                          \
+        if (zz[k] == 0) continue;                                                              \
+        const T *Wk = W + k * n;                                                               \
+        for (int64_t j = first; j < n; ++j) it[j] += zz[k] * Wk[j];                            \
+    }                                                                                          \
+    int any = 0;                                                                               \
+    for (int64_t j = first; j < n; ++j) {                                                      \
+        it[j] = I[j] + it[j];                                                                  \
+        NAME##_heun(vv[j], uu[j], it[j], a, b, dt, &v1[j], &u1[j]);                            \
+        any |= !(v1[j] - vpeak < 0);                                                           \
+    }                                                                                          \
+    if (!any) {                                                                                \
+        for (int64_t j = first; j < n; ++j) { vv[j] = v1[j]; uu[j] = u1[j]; zz[j] = 0; }       \
+        return;                                                                                \
+    }                                                                                          \
+    for (int64_t j = first; j < n; ++j) {                                                      \
+        T x = v1[j] - vpeak;                                                                   \
+        if (isnan(x)) x = 0;                                                                   \
+        if (x >= 0) {                                                                          \
+            T th = (vpeak - vv[j]) / (v1[j] - vv[j]);                                          \
+            if (isnan(th)) th = 0;                                                             \
+            th = th < 0 ? 0 : (th > 1 ? 1 : th);                                               \
+            T ur = uu[j] + th * (u1[j] - uu[j]) + d;                                           \
+            T vr = (T)0 + c;                                                                   \
+            NAME##_heun(vr, ur, it[j], a, b, ((T)1.0 - th) * dt, &vv[j], &uu[j]);              \
+            zz[j] = 1;                                                                         \
+            cnt[j] += 1;                                                                       \
+        } else {                                                                               \
+            vv[j] = v1[j]; uu[j] = u1[j]; zz[j] = 0;                                           \
         }                                                                                      \
     }                                                                                          \
+}                                                                                              \
+static inline void NAME##_row(T *vv, T *uu, T *zz, const T *W, const T *I, T *cnt, int64_t n, \
+                              int64_t substeps, T dt, T a, T b, T c, T d, T vpeak) {           \
+    for (int64_t s = 0; s < substeps; ++s)                                                     \
+        NAME##_substep(vv, uu, zz, W, I, cnt, n, 0, dt, a, b, c, d, vpeak);                    \
 }
 
 DEFINE_ROW(izh_f32, float)

@@ -1,0 +1,347 @@
+"""Reproduce the paper's Tables I and II: many seeded runs per controller, resumable.
+
+All runs of one controller evolve in one batch (run axis R). After every
+``checkpoint_every`` generations the whole state (NEAT state with its RNG streams, and the
+best-fitness history for Fig. 8) is written atomically to ``OUT/<controller>.ckpt``, so a
+reproduction killed at any point resumes with ``resume=True`` and ends with the same table
+as an uninterrupted one. Solved runs are frozen (not evaluated again).
+
+A run's score is its solving generation (1-based, as the paper counts); a run that does
+not solve within ``generations`` counts as ``generations + 1`` (the paper's 101).
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+from torch import Tensor
+
+from evolution.checkpoint import atomic_torch_save, load_checkpoint_dict
+from evolution.config import NEATConfig
+from evolution.neat import NEAT
+from evolution.population import Genomes
+from tasks.cartpole import DEFAULT_PLANT
+
+__all__ = ["PAPER", "TASKS", "ControllerRuns", "ReproduceError", "run_controller", "summarize"]
+
+# [Qiu19] Tables I and II (failures counted as 101 generations in median and mean).
+PAPER = {
+    "table1": {"sigmoid": {"best": 3, "worst": 55, "median": 17.5, "mean": 21.68, "failures": 1, "runs": 60},
+               "snn": {"best": 1, "worst": 92, "median": 9.5, "mean": 16.55, "failures": 1, "runs": 60}},
+    "table2": {"sigmoid": {"best": 8, "worst": 96, "median": 44, "mean": 50.35, "failures": 7, "runs": 60},
+               "snn": {"best": 5, "worst": 65, "median": 21.5, "mean": 24.70, "failures": 0, "runs": 60}},
+}
+LABELS = {"snn": "NEAT-SNN", "sigmoid": "NEAT original (sigmoid)"}
+
+
+class ReproduceError(ValueError):
+    """A reproduction cannot start or resume as asked (the message names the option)."""
+
+
+@dataclass(frozen=True)
+class Task:
+    """One of the paper's tasks: how to configure and score each controller."""
+
+    name: str
+    description: str
+    config: Callable[..., NEATConfig]  # (controller, self_loops=...) -> NEATConfig
+    fitness: Callable[..., Callable[[Genomes], Tensor]]  # (controller, config) -> fitness_fn
+    max_steps: int
+    tau_s: float
+
+
+def _tasks() -> dict[str, Task]:
+    from tasks.experiments import cartpole as cp
+
+    return {
+        "table1": Task("table1", "Markov cart-pole (Table I): x, x_dot, theta, theta_dot as Bernoulli-coded input "
+                       "spikes, bang-bang +-10 N, tau 20 ms, success at 100,000 steps",
+                       cp.markov_config, cp.markov_fitness, cp.MARKOV["max_steps"], cp.MARKOV["tau_s"]),
+        "table2": Task("table2", "non-Markov cart-pole (Table II): x and theta only, continuous force, tau 10 ms, "
+                       "start at 3 degrees, success at 5000 steps",
+                       cp.controller_config, cp.nonmarkov_fitness, cp.NONMARKOV["max_steps"], cp.NONMARKOV["tau_s"]),
+    }
+
+
+TASKS = ("table1", "table2")
+
+
+@dataclass
+class ControllerRuns:
+    """Everything a table row, Fig. 8 and the champion plots need, for one controller."""
+
+    controller: str
+    seeds: list[int]
+    generations: int
+    solved_generation: list[int]  # 1-based; -1 = not solved within the budget
+    best_fitness: list[float]  # champion's fitness (control steps) per run
+    history: Tensor  # [generations, R]: best fitness so far after each generation
+    champions: Genomes  # [R, 1]
+    config: NEATConfig
+    wall_s: float
+    extra: dict = field(default_factory=dict)
+
+    def counted(self) -> list[int]:
+        """Solving generation per run, failures as ``generations + 1``."""
+        return [g if g > 0 else self.generations + 1 for g in self.solved_generation]
+
+    def row(self) -> dict:
+        counted = self.counted()
+        failures = sum(g <= 0 for g in self.solved_generation)
+        return {"controller": self.controller, "best": min(counted), "worst": max(counted),
+                "median": statistics.median(counted), "mean": statistics.mean(counted),
+                "failures": failures, "runs": len(counted), "failure_rate": f"{failures}/{len(counted)}",
+                "wall_s": self.wall_s}
+
+
+def _progress(total: int, initial: int, desc: str, enabled: bool):
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, initial=initial, desc=desc, unit="gen", disable=not enabled, file=sys.stderr)
+
+
+def run_controller(task_name: str, controller: str, seeds: list[int], generations: int, out: str | os.PathLike,
+                   *, resume: bool = False, self_loops: bool = False, checkpoint_every: int = 1,
+                   device: str | torch.device = "cpu", progress: bool = True,
+                   stop_after: int | None = None) -> ControllerRuns:
+    """Evolve ``controller`` on ``task_name`` for each seed (one batch), checkpointing to ``out``.
+
+    ``resume`` continues from ``OUT/<controller>.ckpt`` (which must have been written with
+    the same task, seeds, budget and start genome); without it an existing checkpoint is an
+    error, so a finished reproduction is never overwritten by accident. ``stop_after``
+    (generations in this call) exists for tests of interruption.
+    """
+    tasks = _tasks()
+    if task_name not in tasks:
+        raise ReproduceError(f"table must be one of {TASKS}, got {task_name!r}")
+    task = tasks[task_name]
+    if checkpoint_every < 1:
+        raise ReproduceError(f"checkpoint_every must be >= 1, got {checkpoint_every}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"{controller}.ckpt"
+    identity = {"task": task_name, "controller": controller, "seeds": list(seeds), "generations": generations,
+                "self_loops": self_loops}
+    if path.exists():
+        if not resume:
+            raise ReproduceError(f"{path} exists: pass --resume to continue it, or choose another --out")
+        data = load_checkpoint_dict(path, map_location="cpu")
+        saved = data.get("identity", {})
+        for key, value in identity.items():
+            if saved.get(key) != value:
+                raise ReproduceError(f"cannot resume {path}: it was written with {key}={saved.get(key)!r}, "
+                                     f"this call asks for {key}={value!r}")
+        neat = NEAT.from_state_dict(data["neat"], device=device, name=str(path))
+        history = list(data["history"].unbind(0)) if data["history"].numel() else []
+        wall = float(data["wall_s"])
+        config = neat.config
+    else:
+        config = task.config(controller, self_loops=self_loops)
+        neat = NEAT(config, seeds=seeds, device=device)
+        history, wall = [], 0.0
+
+    fitness_fn = task.fitness(controller, config)
+
+    def save() -> None:
+        stacked = torch.stack(history) if history else torch.zeros(0, len(seeds), dtype=torch.float64)
+        atomic_torch_save({"identity": identity, "neat": neat.state_dict(), "history": stacked, "wall_s": wall}, path)
+
+    bar = _progress(generations, neat.generation, f"{task_name} {controller}", progress)
+    done_here = 0
+    try:
+        while neat.generation < generations and bool(neat.active_runs.any()):
+            if stop_after is not None and done_here >= stop_after:
+                break
+            start = time.perf_counter()
+            fitness = neat.evaluate_active(fitness_fn, neat.ask())
+            neat.tell(fitness)
+            history.append(neat.best_fitness.detach().cpu().clone())
+            wall += time.perf_counter() - start
+            done_here += 1
+            bar.update(1)
+            bar.set_postfix(solved=f"{int((neat.solved_generation > 0).sum())}/{neat.num_runs}",
+                            best=f"{neat.best_fitness.max().item():.0f}")
+            finished = neat.generation >= generations or not bool(neat.active_runs.any())
+            if neat.generation % checkpoint_every == 0 or finished:
+                save()
+    finally:
+        bar.close()
+    if stop_after is None and history and (neat.generation >= generations or not bool(neat.active_runs.any())):
+        save()
+    hist = torch.stack(history) if history else torch.zeros(0, len(seeds), dtype=torch.float64)
+    # Runs that solved early keep their final best for the rest of the budget (Fig. 8).
+    if 0 < hist.shape[0] < generations:
+        hist = torch.cat([hist, hist[-1:].expand(generations - hist.shape[0], -1)])
+    return ControllerRuns(controller=controller, seeds=list(seeds), generations=generations,
+                          solved_generation=neat.solved_generation.cpu().tolist(),
+                          best_fitness=neat.best_fitness.cpu().tolist(), history=hist,
+                          champions=neat.best_genomes.to("cpu"), config=config, wall_s=wall,
+                          extra={"complete": neat.generation >= generations or not bool(neat.active_runs.any())})
+
+
+def mann_whitney(a: list[int], b: list[int]) -> dict:
+    """Two-sided Mann-Whitney U test (scipy) of generations-to-solve, failures as 101."""
+    from scipy.stats import mannwhitneyu
+
+    if len(set(a) | set(b)) == 1:
+        return {"U": float("nan"), "p_value": 1.0, "note": "all values equal"}
+    res = mannwhitneyu(a, b, alternative="two-sided")
+    return {"U": float(res.statistic), "p_value": float(res.pvalue)}
+
+
+def summarize(results: dict[str, ControllerRuns], table: str) -> dict:
+    """Rows, the U-test and the paper's rows, as one JSON-able dict."""
+    rows = {c: r.row() for c, r in results.items()}
+    out = {"table": table, "rows": rows, "paper": PAPER.get(table, {})}
+    if "snn" in results and "sigmoid" in results:
+        out["mann_whitney_u"] = mann_whitney(results["snn"].counted(), results["sigmoid"].counted())
+    return out
+
+
+def format_markdown(summary: dict, seeds: list[int], command: str) -> str:
+    """The table as the paper prints it, ours beside the paper's."""
+    lines = [f"# {summary['table'].replace('table', 'Table ')} reproduced", "",
+             f"Command: `{command}`", f"Seeds: {seeds[0]}..{seeds[-1]} ({len(seeds)} runs per controller)", "",
+             "| Controller | Source | Best | Worst | Median | Mean | Failure rate | Wall time (s) |",
+             "|---|---|---|---|---|---|---|---|"]
+    for c, row in summary["rows"].items():
+        lines.append(f"| {LABELS.get(c, c)} | this code | {row['best']} | {row['worst']} | {row['median']:g} | "
+                     f"{row['mean']:.2f} | {row['failure_rate']} | {row['wall_s']:.0f} |")
+        paper = summary["paper"].get(c)
+        if paper:
+            lines.append(f"| {LABELS.get(c, c)} | paper | {paper['best']} | {paper['worst']} | {paper['median']:g} | "
+                         f"{paper['mean']:.2f} | {paper['failures']}/{paper['runs']} | |")
+    lines += ["", "Median and mean count a failed run (no solution within the budget) as budget + 1 generations."]
+    if "mann_whitney_u" in summary:
+        mw = summary["mann_whitney_u"]
+        p = mw["p_value"]
+        lines.append(f"Mann-Whitney U (two-sided, NEAT-SNN vs sigmoid NEAT): U = {mw['U']:g}, p = {p:.3g}"
+                     + (" (significant at 0.01)" if p < 0.01 else " (not significant at 0.01)"))
+    return "\n".join(lines) + "\n"
+
+
+
+
+# --- the report ----------------------------------------------------------------------
+def _record_episode(r: ControllerRuns, task: str, run: int) -> dict:
+    from tasks.controllers import SigmoidPolicy, SigmoidSpec, SpikingPolicy, SpikingSpec, closed_loop
+    from tasks.experiments.cartpole import NONMARKOV, nonmarkov_start
+
+    one = r.champions.select_runs([run])
+    tau = NONMARKOV["tau_s"]
+    if r.controller == "snn":
+        policy = SpikingPolicy(one, r.config, SpikingSpec(), tau, DEFAULT_PLANT)
+    else:
+        policy = SigmoidPolicy(one, r.config, SigmoidSpec(), DEFAULT_PLANT, tau_s=tau)
+    _, trace = closed_loop(policy, nonmarkov_start(1, dtype=one.weight.dtype), tau_s=tau,
+                           max_steps=NONMARKOV["max_steps"], record=True)
+    trace = {k: v[:, 0] for k, v in trace.items()}
+    trace["nodes"] = getattr(policy, "nodes", None)
+    return trace
+
+
+def _example_run(r: ControllerRuns) -> int:
+    """The first solved run (the paper plots a solved controller), else the fittest."""
+    solved = [i for i, g in enumerate(r.solved_generation) if g > 0]
+    return solved[0] if solved else max(range(len(r.best_fitness)), key=r.best_fitness.__getitem__)
+
+
+def _generalization(r: ControllerRuns) -> list[float]:
+    from tasks.generalization import success_rate
+
+    rate = success_rate(r.champions, r.config, controller=r.controller)  # [R, 1]
+    return rate[:, 0].tolist()
+
+
+def write_report(results: dict[str, ControllerRuns], table: str, out: str | os.PathLike, *, command: str,
+                 generalization: bool = True) -> list[Path]:
+    """Write the table (Markdown, CSV), per-run CSV, summary JSON, Fig. 8, an example
+    trajectory and topology per controller, and every champion genome. Returns the paths."""
+    import csv
+    import io
+    import json
+
+    from evolution.checkpoint import atomic_write_bytes
+    from evolution.genome_io import save_genome
+    from snn_torch.plots import save_figure
+    from tasks.plots import plot_best_fitness_mean_std, plot_episode, plot_topology, plot_trajectory
+
+    out = Path(out)
+    written: list[Path] = []
+    summary = summarize(results, table)
+    seeds = next(iter(results.values())).seeds
+    if generalization and table == "table2":
+        for c, r in results.items():
+            rates = _generalization(r)
+            r.extra["generalization"] = rates
+            summary["rows"][c]["generalization_mean"] = statistics.mean(rates)
+            summary["rows"][c]["generalization_median"] = statistics.median(rates)
+            solved = [x for x, g in zip(rates, r.solved_generation, strict=True) if g > 0]
+            summary["rows"][c]["generalization_solved_mean"] = statistics.mean(solved) if solved else float("nan")
+    summary["command"] = command
+    summary["seeds"] = seeds
+    md = format_markdown(summary, seeds, command)
+    if "generalization_mean" in next(iter(summary["rows"].values())):
+        md += ("\nGeneralisation (beyond the paper): fraction of the 625 start states of Gruau et al. (1996), "
+               "scaled to this plant, that each run's champion balances for 1000 steps.\n\n"
+               "| Controller | mean over runs | median | mean over solved runs |\n|---|---|---|---|\n")
+        for c, row in summary["rows"].items():
+            md += (f"| {LABELS.get(c, c)} | {row['generalization_mean']:.3f} | {row['generalization_median']:.3f} | "
+                   f"{row['generalization_solved_mean']:.3f} |\n")
+    written.append(atomic_write_bytes(out / f"{table}.md", md.encode()))
+
+    buf = io.StringIO()
+    fields = ["controller", "source", "best", "worst", "median", "mean", "failures", "runs", "wall_s"]
+    w = csv.DictWriter(buf, fieldnames=fields, extrasaction="ignore")
+    w.writeheader()
+    for c, row in summary["rows"].items():
+        w.writerow({**row, "source": "this code"})
+        if c in summary["paper"]:
+            w.writerow({"controller": c, "source": "paper", **summary["paper"][c]})
+    written.append(atomic_write_bytes(out / f"{table}.csv", buf.getvalue().encode()))
+
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["controller", "run", "seed", "solved_generation", "counted_generations", "best_fitness",
+                "hidden_nodes", "enabled_connections", "generalization"])
+    for c, r in results.items():
+        hidden = (r.champions.node[:, 0].sum(-1) - r.config.num_inputs - r.config.num_bias - r.config.num_outputs)
+        conns = r.champions.enabled[:, 0].sum((-1, -2))
+        gen = r.extra.get("generalization", [""] * len(r.seeds))
+        for i, seed in enumerate(r.seeds):
+            w.writerow([c, i, seed, r.solved_generation[i], r.counted()[i], r.best_fitness[i], int(hidden[i]),
+                        int(conns[i]), gen[i]])
+    written.append(atomic_write_bytes(out / "runs.csv", buf.getvalue().encode()))
+    written.append(atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2, default=float).encode()))
+
+    target = float(next(iter(results.values())).config.fitness_threshold)
+    fig = plot_best_fitness_mean_std({LABELS.get(c, c): r.history.T for c, r in results.items()}, max_fitness=target,
+                                     title=f"Best fitness per generation over {len(seeds)} runs (Fig. 8)")
+    written.append(save_figure(fig, out / "fig8_best_fitness.png"))
+    for c, r in results.items():
+        run = _example_run(r)
+        label = f"{LABELS.get(c, c)}, seed {r.seeds[run]}" + (
+            f", solved at generation {r.solved_generation[run]}" if r.solved_generation[run] > 0 else ", not solved")
+        if table == "table2":
+            tr = _record_episode(r, table, run)
+            tau = 0.01
+            if c == "snn":
+                names = [f"node {int(n)}" for n in tr["nodes"]]
+                fig = plot_episode(tr["activity"], tr["x"], tr["theta"], tr["force"], tau_s=tau, names=names,
+                                   title=label)
+            else:
+                fig = plot_trajectory(tr["x"], tr["theta"], tr["force"], tau_s=tau, title=label)
+            written.append(save_figure(fig, out / f"trajectory_{c}.png"))
+        written.append(save_figure(plot_topology(r.champions, r.config, run, 0, title=f"Champion topology: {label}"),
+                                   out / f"topology_{c}.png"))
+        for i, seed in enumerate(r.seeds):
+            written.append(save_genome(out / "champions" / f"{c}_seed{seed}.json", r.champions.select_runs([i]),
+                                       r.config, fitness=r.best_fitness[i]))
+    return written

@@ -1,0 +1,144 @@
+"""Generalisation of a non-Markov cart-pole controller: 625 fixed start states, success rate.
+
+Gruau, Whitley & Pyeatt (1996) test a pole balancer beyond the single start it was evolved
+on: each of the four state variables takes 0.05, 0.25, 0.5, 0.75 and 0.95 of its range, all
+5^4 = 625 combinations, and the network must balance for 1000 steps from each. Their ranges
+(as Stanley & Miikkulainen 2002 report them): x in +-2.16 m, x_dot in +-1.35 m/s, theta in
++-3.6 degrees, theta_dot in +-8.6 degrees/s. The fractions of a range ``[-a, a]`` are the
+values ``a * (2 f - 1)`` = ``a * (-0.9, -0.5, 0, 0.5, 0.9)``.
+
+Scaled to this plant (``CartPoleParams``): x keeps 0.9 of the track half-length (2.16 m of
+2.4 m, Gruau's own track), theta keeps 0.3 of the failure angle (3.6 degrees of 12 degrees,
+Gruau's absolute value; scaling his 3.6 of 36 degrees down to 1.2 degrees would make the test
+easier than the paper's own 3-degree start, which this range contains), and the velocities
+keep Gruau's absolute values. Every start lies strictly inside the failure limits.
+
+A start counts as a success when the controller balances for ``steps`` control steps (default
+1000, Gruau's; the paper's Table II task asks 5000).
+
+Everything is batched: ``C`` controllers x ``S`` starts are one closed loop of ``C * S`` rows,
+ordered controller-major (row ``c * S + s`` runs controller ``c`` from start ``s``).
+
+    from tasks.generalization import start_grid, success_rate
+    rate = success_rate(champion, config)  # [R, P]: fraction of the 625 starts balanced
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor
+
+from evolution.config import NEATConfig
+from evolution.population import Genomes
+from tasks.cartpole import DEFAULT_PLANT, CartPoleParams, cartpole_failed
+from tasks.controllers import SigmoidPolicy, SigmoidSpec, SpikingPolicy, SpikingSpec, closed_loop
+from tasks.experiments.cartpole import NONMARKOV
+
+__all__ = ["GRID_FRACTIONS", "GRID_STEPS", "grid_ranges", "start_grid", "repeat_genomes", "make_policy",
+           "steps_from_starts", "policy_success_rate", "success_rate", "check_starts"]
+
+GRID_FRACTIONS = (0.05, 0.25, 0.5, 0.75, 0.95)  # [Gruau96]
+GRID_STEPS = 1000  # [Gruau96]: balanced for 1000 steps counts as a success
+_X_FRACTION = 0.9  # 2.16 m of a 2.4 m track
+_THETA_FRACTION = 0.3  # 3.6 degrees of a 12-degree failure angle
+_X_DOT_RANGE = 1.35  # m/s
+_THETA_DOT_RANGE = math.radians(8.6)  # rad/s
+_TAU_S = NONMARKOV["tau_s"]  # [Qiu19] Table II control period, 0.01 s
+
+
+def grid_ranges(plant: CartPoleParams = DEFAULT_PLANT) -> tuple[float, float, float, float]:
+    """Half-ranges ``a`` of (x, x_dot, theta, theta_dot) for ``plant``, SI units."""
+    return (_X_FRACTION * plant.x_limit, _X_DOT_RANGE, _THETA_FRACTION * plant.theta_limit, _THETA_DOT_RANGE)
+
+
+def start_grid(plant: CartPoleParams = DEFAULT_PLANT, *, device: str | torch.device = "cpu",
+               dtype: torch.dtype = torch.float32) -> Tensor:
+    """The 625 start states ``[625, 4]``: every combination of the 5 fractions of each range.
+
+    Row order: x varies slowest, theta_dot fastest (``itertools.product`` order).
+    """
+    frac = torch.tensor(GRID_FRACTIONS, dtype=torch.float64)
+    axes = [a * (2.0 * frac - 1.0) for a in grid_ranges(plant)]
+    grid = torch.cartesian_prod(*axes)
+    return grid.to(device=device, dtype=dtype)
+
+
+def check_starts(starts: Tensor, plant: CartPoleParams = DEFAULT_PLANT, *, name: str = "starts") -> Tensor:
+    """``starts`` as an ``[S, 4]`` tensor of finite states inside the failure limits, else ``ValueError``."""
+    if not isinstance(starts, Tensor):
+        starts = torch.as_tensor(starts, dtype=torch.float32)
+    if starts.dim() == 1 and starts.shape[0] == 4:
+        starts = starts.unsqueeze(0)
+    if starts.dim() != 2 or starts.shape[-1] != 4 or starts.shape[0] == 0:
+        raise ValueError(f"{name} must be a [S, 4] tensor of (x, x_dot, theta, theta_dot) with S >= 1, "
+                         f"got shape {tuple(starts.shape)}")
+    if not starts.is_floating_point():
+        raise ValueError(f"{name} must be floating point, got {starts.dtype}")
+    if not bool(torch.isfinite(starts).all()):
+        raise ValueError(f"{name} holds NaN or inf")
+    outside = cartpole_failed(starts, plant)
+    if bool(outside.any()):
+        raise ValueError(f"{name} rows {torch.nonzero(outside).flatten()[:10].tolist()} lie outside the failure "
+                         f"limits (|x| <= {plant.x_limit}, |theta| <= {plant.theta_limit:.4f})")
+    return starts
+
+
+def repeat_genomes(genomes: Genomes, repeats: int) -> Genomes:
+    """Each of the ``R x P`` genomes ``repeats`` times: a ``[R * P, repeats]`` population
+    (flattened rows are controller-major, matching ``steps_from_starts``)."""
+    R, P = genomes.num_runs, genomes.pop_size
+    out = {}
+    for name, t in genomes.tensors().items():
+        flat = t.reshape(R * P, 1, *t.shape[2:])
+        out[name] = flat.expand(R * P, repeats, *t.shape[2:])
+    return Genomes(**out)
+
+
+def make_policy(genomes: Genomes, config: NEATConfig, controller: str = "snn", *, spiking: SpikingSpec | None = None,
+                sigmoid: SigmoidSpec | None = None, plant: CartPoleParams = DEFAULT_PLANT, tau_s: float = _TAU_S):
+    """The non-Markov controller (``"snn"`` or ``"sigmoid"``) of every genome, batched as ``R * P`` rows."""
+    if controller == "snn":
+        return SpikingPolicy(genomes, config, SpikingSpec() if spiking is None else spiking, tau_s, plant)
+    if controller == "sigmoid":
+        return SigmoidPolicy(genomes, config, SigmoidSpec() if sigmoid is None else sigmoid, plant)
+    raise ValueError(f"controller must be 'snn' or 'sigmoid', got {controller!r}")
+
+
+def steps_from_starts(policy, starts: Tensor, num_controllers: int, *, max_steps: int, tau_s: float = _TAU_S,
+                      plant: CartPoleParams = DEFAULT_PLANT) -> Tensor:
+    """Steps balanced ``[C, S]`` by ``C`` controllers from each of ``S`` starts, one closed loop.
+
+    ``policy`` must hold ``C * S`` rows, controller-major (``make_policy(repeat_genomes(g, S), ...)``).
+    """
+    starts = check_starts(starts, plant)
+    S = starts.shape[0]
+    state0 = starts.repeat(num_controllers, 1)  # row c * S + s = start s
+    steps, _ = closed_loop(policy, state0, tau_s=tau_s, max_steps=max_steps, plant=plant)
+    return steps.view(num_controllers, S)
+
+
+def policy_success_rate(policy, num_controllers: int, starts: Tensor | None = None, *, steps: int = GRID_STEPS,
+                        tau_s: float = _TAU_S, plant: CartPoleParams = DEFAULT_PLANT) -> Tensor:
+    """Fraction ``[C]`` (float64) of ``starts`` (default: the 625-state grid) that each of the
+    ``C`` controllers in ``policy`` balances for ``steps`` control steps."""
+    starts = start_grid(plant) if starts is None else starts
+    balanced = steps_from_starts(policy, starts, num_controllers, max_steps=steps, tau_s=tau_s, plant=plant)
+    return (balanced >= steps).to(torch.float64).mean(-1)
+
+
+def success_rate(genomes: Genomes, config: NEATConfig, *, controller: str = "snn", starts: Tensor | None = None,
+                 steps: int = GRID_STEPS, spiking: SpikingSpec | None = None, sigmoid: SigmoidSpec | None = None,
+                 plant: CartPoleParams = DEFAULT_PLANT, tau_s: float = _TAU_S) -> Tensor:
+    """Fraction ``[R, P]`` (float64) of the start states each genome balances for ``steps`` steps.
+
+    All ``R * P`` genomes x ``S`` starts (default the 625-state grid) run as one batch.
+    """
+    starts = start_grid(plant, device=genomes.device, dtype=genomes.weight.dtype) if starts is None else starts
+    starts = check_starts(starts, plant).to(device=genomes.device, dtype=genomes.weight.dtype)
+    C = genomes.num_runs * genomes.pop_size
+    policy = make_policy(repeat_genomes(genomes, starts.shape[0]), config, controller, spiking=spiking,
+                         sigmoid=sigmoid, plant=plant, tau_s=tau_s)
+    rate = policy_success_rate(policy, C, starts, steps=steps, tau_s=tau_s, plant=plant)
+    return rate.view(genomes.num_runs, genomes.pop_size)
