@@ -151,7 +151,9 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
 
     def save() -> None:
         stacked = torch.stack(history) if history else torch.zeros(0, len(seeds), dtype=torch.float64)
-        atomic_torch_save({"identity": identity, "neat": neat.state_dict(), "history": stacked, "wall_s": wall}, path)
+        state = neat.state_dict()
+        atomic_torch_save({"format": state["format"], "version": state["version"], "identity": identity, "neat": state, "history": stacked,
+                           "wall_s": wall}, path)
 
     bar = _progress(generations, neat.generation, f"{task_name} {controller}", progress)
     done_here = 0

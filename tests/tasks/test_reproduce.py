@@ -1,0 +1,111 @@
+"""`snn-neat reproduce`: end to end, resumable after a real SIGKILL, clear errors."""
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import torch
+
+from evolution.checkpoint import load_checkpoint_dict
+from tasks.cli import main
+from tasks.experiments.reproduce import ControllerRuns, ReproduceError, mann_whitney, run_controller
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _rows(path: Path) -> list[dict]:
+    with open(path) as f:
+        return list(csv.DictReader(f))
+
+
+def test_short_reproduction_writes_every_artefact(tmp_path, capsys):
+    out = tmp_path / "t2"
+    assert main(["reproduce", "table2", "--runs", "2", "--generations", "3", "--seed", "100",
+                 "--out", str(out), "--quiet", "--threads", "1"]) == 0
+    names = {p.name for p in out.iterdir()}
+    for name in ("table2.md", "table2.csv", "runs.csv", "summary.json", "fig8_best_fitness.png",
+                 "trajectory_snn.png", "trajectory_sigmoid.png", "topology_snn.png", "topology_sigmoid.png",
+                 "snn.ckpt", "sigmoid.ckpt", "champions"):
+        assert name in names, name
+    for png in out.glob("*.png"):
+        assert png.stat().st_size > 10_000
+    assert len(list((out / "champions").glob("*.json"))) == 4
+    runs = _rows(out / "runs.csv")
+    assert [(r["controller"], r["seed"]) for r in runs] == [("snn", "100"), ("snn", "101"),
+                                                              ("sigmoid", "100"), ("sigmoid", "101")]
+    for r in runs:
+        g = int(r["solved_generation"])
+        assert int(r["counted_generations"]) == (g if g > 0 else 4)
+        assert 0.0 <= float(r["generalization"]) <= 1.0
+    summary = json.loads((out / "summary.json").read_text())
+    assert set(summary["rows"]) == {"snn", "sigmoid"}
+    assert 0.0 <= summary["mann_whitney_u"]["p_value"] <= 1.0
+    assert summary["paper"]["snn"]["median"] == 21.5
+    table = (out / "table2.md").read_text()
+    assert "| NEAT-SNN | paper | 5 | 65 | 21.5 | 24.70 | 0/60 |" in table and "Mann-Whitney" in table
+    assert "table2.md" in capsys.readouterr().out
+    # Without --resume, an existing reproduction is not overwritten.
+    with pytest.raises(SystemExit, match="--resume"):
+        main(["reproduce", "table2", "--runs", "2", "--generations", "3", "--seed", "100", "--out", str(out),
+              "--quiet"])
+
+
+def test_resume_rejects_a_different_reproduction(tmp_path):
+    run_controller("table2", "sigmoid", [0, 1], 2, tmp_path, progress=False)
+    with pytest.raises(ReproduceError, match="seeds"):
+        run_controller("table2", "sigmoid", [0, 2], 2, tmp_path, resume=True, progress=False)
+    with pytest.raises(ReproduceError, match="table must be one of"):
+        run_controller("table3", "sigmoid", [0], 2, tmp_path, progress=False)
+
+
+def test_interrupted_then_resumed_equals_uninterrupted(tmp_path):
+    kw = dict(generations=6, progress=False)
+    whole = run_controller("table2", "snn", [5, 6, 7], out=tmp_path / "a", **kw)
+    part = run_controller("table2", "snn", [5, 6, 7], out=tmp_path / "b", stop_after=2, **kw)
+    assert not part.extra["complete"]
+    done = run_controller("table2", "snn", [5, 6, 7], out=tmp_path / "b", resume=True, **kw)
+    assert done.solved_generation == whole.solved_generation and done.best_fitness == whole.best_fitness
+    assert torch.equal(done.history, whole.history)
+    for name, t in whole.champions.tensors().items():
+        assert torch.equal(getattr(done.champions, name), t)
+
+
+def test_sigkill_midway_then_resume_gives_the_same_table(tmp_path):
+    args = ["reproduce", "table2", "--runs", "3", "--generations", "12", "--seed", "40", "--quiet", "--threads", "1",
+            "--no-generalization"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    ref, cut = tmp_path / "ref", tmp_path / "cut"
+    subprocess.run([sys.executable, "-m", "tasks.cli", *args, "--out", str(ref)], check=True, env=env,
+                   capture_output=True, timeout=600)
+    proc = subprocess.Popen([sys.executable, "-m", "tasks.cli", *args, "--out", str(cut)], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    ckpt = cut / "snn.ckpt"
+    deadline = time.time() + 300
+    while time.time() < deadline:
+        if ckpt.exists() and load_checkpoint_dict(ckpt)["neat"]["generation"] >= 2:
+            break
+        time.sleep(0.05)
+    assert proc.poll() is None, "the reproduction finished before it could be killed"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert not (cut / "table2.md").exists()
+    subprocess.run([sys.executable, "-m", "tasks.cli", *args, "--out", str(cut), "--resume"], check=True, env=env,
+                   capture_output=True, timeout=600)
+    assert _rows(cut / "runs.csv") == _rows(ref / "runs.csv")
+    strip = lambda rows: [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]  # noqa: E731
+    assert strip(_rows(cut / "table2.csv")) == strip(_rows(ref / "table2.csv"))
+
+
+def test_mann_whitney_and_counting():
+    assert mann_whitney([5] * 10, [5] * 10)["p_value"] == 1.0
+    assert mann_whitney(list(range(1, 11)), list(range(50, 60)))["p_value"] < 0.001
+    r = ControllerRuns("snn", [0, 1, 2], 100, [5, -1, 30], [5000.0, 10.0, 5000.0], torch.zeros(0, 3), None, None, 0.0)
+    assert r.counted() == [5, 101, 30]
+    row = r.row()
+    assert (row["best"], row["worst"], row["median"], row["failure_rate"]) == (5, 101, 30, "1/3")
