@@ -1,6 +1,7 @@
 """Figures for the cart-pole experiments and the notebooks: fitness progress (the paper's
 Fig. 8), trajectories (Figs. 3, 4, 6, 7), a champion's topology (Fig. 5), spike rasters,
-species sizes, a cart-pole animation and a training-loss curve.
+species sizes, a cart-pole animation, a training-loss curve, and an EvoTorch weight search's
+progress with the success rates it reaches.
 
 Every function returns a ``matplotlib.figure.Figure`` (``animate_cartpole`` a
 ``FuncAnimation``) built without pyplot, so it works headless (Agg) and inline in notebooks;
@@ -34,7 +35,7 @@ if TYPE_CHECKING:
 
 __all__ = ["plot_best_fitness_mean_std", "plot_trajectory", "plot_topology", "plot_raster",
            "plot_episode", "plot_species_sizes", "plot_evolution_progress", "plot_training_curve",
-           "animate_cartpole", "EvolutionHistory"]
+           "plot_search_progress", "plot_success_rates", "animate_cartpole", "EvolutionHistory"]
 
 
 def _numpy(values) -> np.ndarray:
@@ -289,6 +290,63 @@ def plot_training_curve(losses, *, accuracy=None, title: str = "") -> Figure:
         ax_acc.set_ylim(0, 1.02)
     ax.legend(handles=handles, loc="center right")
     ax.set_title(title or "training")
+    return fig
+
+
+def plot_search_progress(log, *, max_fitness: float | None = None, title: str = "") -> Figure:
+    """An EvoTorch search's fitness per generation, from its ``PandasLogger``'s
+    ``to_dataframe()`` (or any mapping of equal-length columns): ``mean_eval`` (the population's
+    mean), ``pop_best_eval`` (the generation's best) and ``best_eval`` (the best so far) if
+    present, plus ``median_eval``; fitness in control steps balanced. The generation numbers
+    are the frame's index (EvoTorch's ``iter``) when it has one, else 1, 2, ..."""
+    columns = {"best_eval": ("best so far", "tab:red", "-"), "pop_best_eval": ("best of generation", "tab:orange", ":"),
+               "median_eval": ("median of population", "tab:green", "--"),
+               "mean_eval": ("mean of population", "tab:blue", "-")}
+    present = [c for c in columns if c in log]
+    if "mean_eval" not in present:
+        raise ValueError(f"log must have a 'mean_eval' column (an EvoTorch PandasLogger frame), got {list(log)}")
+    mean = _numpy(log["mean_eval"])
+    index = getattr(log, "index", None)
+    gens = _numpy(index) if index is not None and len(index) == len(mean) else np.arange(1, len(mean) + 1)
+    fig = Figure(figsize=(7, 4.2), layout="constrained")
+    ax = fig.subplots()
+    for c in present:
+        label, colour, style = columns[c]
+        ax.plot(gens, _numpy(log[c]), color=colour, ls=style, lw=1.6 if c in ("best_eval", "mean_eval") else 1.1,
+                label=label)
+    if max_fitness is not None:
+        ax.axhline(max_fitness, color="grey", lw=0.8, ls="--", label=f"cap ({max_fitness:g} steps)")
+    ax.set_xlabel("generation")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_ylabel("fitness (control steps balanced)")
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best")
+    ax.set_title(title or f"weight search: {len(mean)} generations")
+    return fig
+
+
+def plot_success_rates(rates: dict[str, float], *, num_starts: int | None = None, title: str = "") -> Figure:
+    """Bars of success rates (fractions in [0, 1], shown in percent), e.g. one controller before
+    and after tuning; each bar is labelled with its value (and count of ``num_starts``)."""
+    if not rates:
+        raise ValueError("rates is empty")
+    names, values = list(rates), [float(v) for v in rates.values()]
+    if not all(0.0 <= v <= 1.0 for v in values):
+        raise ValueError(f"rates must be fractions in [0, 1], got {values}")
+    fig = Figure(figsize=(max(3.5, 1.6 * len(names) + 1.5), 3.8), layout="constrained")
+    ax = fig.subplots()
+    colours = [colormaps["tab10"](k % 10) for k in range(len(names))]
+    bars = ax.bar(names, [100.0 * v for v in values], color=colours, width=0.6)
+    texts = [f"{100.0 * v:.1f} %" + (f"\n({round(v * num_starts)} of {num_starts})" if num_starts else "")
+             for v in values]
+    ax.bar_label(bars, texts, padding=2, fontsize=9)
+    ax.set_ylim(0, 115)
+    ax.set_yticks(range(0, 101, 20))
+    what = f"of the {num_starts} start states" if num_starts else "of the start states"
+    ax.set_ylabel(f"success rate (% {what})")
+    ax.grid(axis="y", alpha=0.3)
+    ax.set_title(title or "success rate")
     return fig
 
 

@@ -341,8 +341,10 @@ def write_report(results: dict[str, ControllerRuns], table: str, out: str | os.P
             else:
                 fig = plot_trajectory(tr["x"], tr["theta"], tr["force"], tau_s=tau, title=label)
             written.append(save_figure(fig, out / f"trajectory_{c}.png"))
-        written.append(save_figure(plot_topology(r.champions, r.config, run, 0, title=f"Champion topology: {label}"),
-                                   out / f"topology_{c}.png"))
+        names = {0: "x", 1: "θ"} if r.config.num_inputs == 2 else {0: "x", 1: "ẋ", 2: "θ", 3: "θ̇"}
+        names[r.config.first_output] = "F"
+        written.append(save_figure(plot_topology(r.champions, r.config, run, 0, labels=names,
+                                                 title=f"Champion topology: {label}"), out / f"topology_{c}.png"))
         for i, seed in enumerate(r.seeds):
             written.append(save_genome(out / "champions" / f"{c}_seed{seed}.json", r.champions.select_runs([i]),
                                        r.config, fitness=r.best_fitness[i]))

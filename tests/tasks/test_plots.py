@@ -4,6 +4,7 @@ import math
 import re
 
 import numpy as np
+import pytest
 import torch
 from matplotlib.animation import PillowWriter
 from matplotlib.image import imread
@@ -23,7 +24,9 @@ from tasks.plots import (
     plot_best_fitness_mean_std,
     plot_episode,
     plot_raster,
+    plot_search_progress,
     plot_species_sizes,
+    plot_success_rates,
     plot_topology,
     plot_training_curve,
     plot_trajectory,
@@ -178,3 +181,35 @@ def test_topology_draws_self_and_recurrent_connections(tmp_path):
     legend = [t.get_text() for t in ax.get_legend().get_texts()]
     assert legend[:2] == ["excitatory (w > 0)", "inhibitory (w < 0)"]
     _non_blank(save_figure(fig, tmp_path / "topology_loops.png"))
+
+
+def test_search_progress_plots_evotorch_log_columns(tmp_path):
+    pd = pytest.importorskip("pandas")
+    log = pd.DataFrame({"mean_eval": [100.0, 150.0, 220.0], "median_eval": [90.0, 140.0, 230.0],
+                        "pop_best_eval": [300.0, 280.0, 410.0], "best_eval": [300.0, 300.0, 410.0],
+                        "worst_eval": [10.0, 10.0, 10.0]}, index=pd.Index([1, 2, 3], name="iter"))
+    fig = plot_search_progress(log, max_fitness=1000, title="SNES")
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "generation" and "control steps balanced" in ax.get_ylabel()
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert labels == ["best so far", "best of generation", "median of population", "mean of population",
+                      "cap (1000 steps)"]
+    assert list(ax.lines[3].get_ydata()) == [100.0, 150.0, 220.0]  # the mean
+    _non_blank(save_figure(fig, tmp_path / "search.png"))
+    # A plain mapping works too (generations numbered from 1); mean_eval is required.
+    fig = plot_search_progress({"mean_eval": [1.0, 2.0]})
+    assert list(fig.axes[0].lines[0].get_xdata()) == [1, 2]
+    with pytest.raises(ValueError, match="mean_eval"):
+        plot_search_progress({"best_eval": [1.0]})
+
+
+def test_success_rates_bars_in_percent(tmp_path):
+    fig = plot_success_rates({"champion": 0.3072, "tuned": torch.tensor(0.536).item()}, num_starts=625)
+    ax = fig.axes[0]
+    assert [round(p.get_height(), 2) for p in ax.patches] == [30.72, 53.6]
+    assert "625 start states" in ax.get_ylabel()
+    texts = [t.get_text() for t in ax.texts]
+    assert texts == ["30.7 %\n(192 of 625)", "53.6 %\n(335 of 625)"]
+    _non_blank(save_figure(fig, tmp_path / "rates.png"))
+    with pytest.raises(ValueError):
+        plot_success_rates({"bad": 1.5})

@@ -1,0 +1,47 @@
+"""The memory ablation's policies really are memoryless, and the evolved one is not."""
+
+import math
+
+import torch
+
+from evolution.neat import NEAT
+from tasks.cartpole import DEFAULT_PLANT
+from tasks.controllers import SpikingPolicy, SpikingSpec
+from tasks.experiments.cartpole import controller_config, nonmarkov_fitness
+from tasks.experiments.memory_ablation import StaticMapPolicy, WipedStatePolicy, ablation_steps
+
+
+def _genomes():
+    cfg = controller_config("snn", pop_size=12)
+    neat = NEAT(cfg, seeds=[3])
+    neat.run(nonmarkov_fitness("snn", cfg, max_steps=300), 3)
+    return neat.ask(), cfg
+
+
+def _forces(cls, genomes, cfg):
+    policy = cls(genomes, cfg, SpikingSpec(), 0.01, DEFAULT_PLANT)
+    a = torch.tensor([[0.1, 0.0, math.radians(2.0), 0.0]]).expand(genomes.pop_size, 4)
+    b = torch.tensor([[-0.5, 0.0, math.radians(-4.0), 0.0]]).expand(genomes.pop_size, 4)
+    first, _ = policy.act(a)
+    policy.act(b)
+    again, _ = policy.act(a)
+    return first, again
+
+
+def test_ablations_are_memoryless_and_the_evolved_policy_is_not():
+    g, cfg = _genomes()
+    for cls in (WipedStatePolicy, StaticMapPolicy):
+        first, again = _forces(cls, g, cfg)
+        assert torch.equal(first, again), cls.__name__
+    first, again = _forces(SpikingPolicy, g, cfg)
+    assert not torch.equal(first, again)
+
+
+def test_ablation_steps_match_the_fitness_as_evolved():
+    g, cfg = _genomes()
+    out = ablation_steps(g, max_steps=300)
+    assert set(out) == {"as evolved", "state wiped", "static map"}
+    fitness = nonmarkov_fitness("snn", cfg, max_steps=300)(g)[0]
+    assert torch.equal(out["as evolved"].double(), fitness)
+    for steps in out.values():
+        assert steps.shape == (g.pop_size,) and int(steps.min()) >= 0 and int(steps.max()) <= 300
