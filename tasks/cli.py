@@ -104,6 +104,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 
     import torch
 
+    from tasks.experiments.distributed import has_shards, run_controller_sharded, run_controllers_on_ray
     from tasks.experiments.reproduce import ReproduceError, run_controller, write_report
 
     if args.threads is not None:
@@ -112,11 +113,19 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     command = "snn-neat " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["reproduce"] else (
         f"snn-neat reproduce {args.table} --runs {args.runs} --seed {args.seed} --out {args.out}")
     results = {}
+    common = dict(resume=args.resume, self_loops=args.self_loops, checkpoint_every=args.checkpoint_every,
+                  device=args.device, progress=not args.quiet)
     try:
-        for c in args.controllers:
-            results[c] = run_controller(args.table, c, seeds, args.generations, args.out, resume=args.resume,
-                                        self_loops=args.self_loops, checkpoint_every=args.checkpoint_every,
-                                        device=args.device, progress=not args.quiet)
+        if args.ray is not None:
+            results = run_controllers_on_ray(args.table, args.controllers, seeds, args.generations, args.out,
+                                             address=args.ray, shards=args.shards, **common)
+        else:
+            for c in args.controllers:
+                if args.shards is not None or has_shards(args.out, c):  # the shard layout of a (Ray) run
+                    results[c] = run_controller_sharded(args.table, c, seeds, args.generations, args.out,
+                                                        shards=args.shards, **common)
+                else:
+                    results[c] = run_controller(args.table, c, seeds, args.generations, args.out, **common)
     except ReproduceError as exc:
         raise SystemExit(f"snn-neat reproduce: error: {exc}") from None
     for path in write_report(results, args.table, args.out, command=command, generalization=not args.no_generalization):
@@ -191,6 +200,12 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--no-generalization", action="store_true",
                      help="skip the 625-start-state generalisation test of every champion")
     rep.add_argument("--quiet", action="store_true", help="no progress bar")
+    rep.add_argument("--ray", default=None, metavar="auto|HOST:PORT",
+                     help="run the seeds as Ray tasks on this cluster ('auto': the one `ray start` started on this "
+                          "machine); OUT must be on a filesystem all its nodes share (default: run locally)")
+    rep.add_argument("--shards", type=_positive_int, default=None,
+                     help="split each controller's runs into N shards, one Ray task each (default with --ray: one "
+                          "per cluster CPU); a resumed run keeps its split")
     rep.set_defaults(func=_cmd_reproduce)
     return parser
 
