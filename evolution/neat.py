@@ -56,7 +56,13 @@ class NEATResult:
 
 
 class NEAT:
-    """Tensor NEAT over ``R = len(seeds)`` independent runs of ``config.pop_size`` genomes."""
+    """Tensor NEAT over ``R = len(seeds)`` independent runs of ``config.pop_size`` genomes.
+
+    ``reproduce_chunk_genomes``: reproduction handles the runs in chunks of about this many
+    genomes (at least one run); it changes speed and memory, never a result.
+    """
+
+    reproduce_chunk_genomes: int = 12_000
 
     def __init__(self, config: NEATConfig, *, seeds: Iterable[int] = (0,), device: str | torch.device = "cpu",
                  dtype: torch.dtype = torch.float32) -> None:
@@ -153,6 +159,22 @@ class NEAT:
         return fitness
 
     def _reproduce(self, fitness: Tensor, evolving: list[int]) -> ReproductionInfo:
+        """Breed the runs ``evolving``, in chunks of at most ``reproduce_chunk_genomes``
+        genomes: runs are independent, so chunking changes no result, and chunks whose gene
+        tensors fit in cache keep the cost per genome from rising with R x P."""
+        per_chunk = max(1, self.reproduce_chunk_genomes // self.config.pop_size)
+        chunks = [evolving[k:k + per_chunk] for k in range(0, len(evolving), per_chunk)]
+        infos = [self._reproduce_runs(fitness, chunk) for chunk in chunks]
+        if len(infos) == 1:
+            return infos[0]
+        width = max(i.offspring.shape[1] for i in infos)
+        offspring = [torch.nn.functional.pad(i.offspring, (0, width - i.offspring.shape[1])) for i in infos]
+        return ReproductionInfo(extinct=torch.cat([i.extinct for i in infos]),
+                                stagnant_removed=torch.cat([i.stagnant_removed for i in infos]),
+                                split_refused=torch.cat([i.split_refused for i in infos]),
+                                offspring=torch.cat(offspring))
+
+    def _reproduce_runs(self, fitness: Tensor, evolving: list[int]) -> ReproductionInfo:
         cfg = self.config
         all_runs = len(evolving) == self.num_runs
         sub = (slice(None),) if all_runs else (torch.tensor(evolving, device=self.device),)

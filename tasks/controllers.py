@@ -48,6 +48,7 @@ from tasks.cartpole import (
     cartpole_step,
     check_state,
 )
+from tasks.counter_rng import fnv1a_keys, mix64, uniform01
 from tasks.fused_loop import (
     MAX_NODES,
     MAX_WINDOW,
@@ -269,10 +270,14 @@ class MarkovSpikingSpec:
     # at each time step: here each 0.5 ms substep, at up to 1000 Hz (probability 0.5 at input 1).
     input_rate_max_hz: float = 1000.0
     synapse_kick_mv: float = 1.0  # as SpikingSpec
-    rate_window_steps: int = 1  # the output neuron's rate over the last control step (20 ms)
-    # F = +10 N above this output rate, -10 N below. None: the rate of a lone neuron under the
-    # background current alone (background_rate_hz), so an output neuron with no net input
-    # sits on the decision boundary.
+    rate_window_steps: int = 1  # rates over the last control step (20 ms)
+    # "weighted_rate": the output node decodes as in the non-Markov task (Fig. 5's caption), from
+    # the rates r_j of the nodes wired to it, each taken relative to its rate at rest (inputs: at
+    # the centre of their range; neurons: under the background current alone):
+    # F = +10 N when sum_j w_j (r_j - rest_j) > threshold_hz (default 0), else -10 N.
+    # "output_neuron": F = +10 N when the output neuron's own rate exceeds threshold_hz (default:
+    # its rate under the background current alone, background_rate_hz).
+    decoder: str = "weighted_rate"
     threshold_hz: float | None = None
 
     def __post_init__(self) -> None:
@@ -286,7 +291,9 @@ class MarkovSpikingSpec:
         if not 1 <= self.rate_window_steps <= MAX_WINDOW:
             raise ValueError(f"MarkovSpikingSpec.rate_window_steps must be in 1..{MAX_WINDOW}, "
                              f"got {self.rate_window_steps}")
-        if self.input_rate_max_hz * self.dt_ms / 1000.0 > 1.0:
+        if self.decoder not in ("weighted_rate", "output_neuron"):
+            raise ValueError(f"MarkovSpikingSpec.decoder must be 'weighted_rate' or 'output_neuron', got {self.decoder!r}")
+        if self.input_rate_max_hz * self.dt_ms / 1000.0 > 1.0 + 1e-12:
             raise ValueError("MarkovSpikingSpec.input_rate_max_hz * dt_ms must be at most one spike per substep")
 
 
@@ -306,43 +313,109 @@ class MarkovSpikingPolicy:
 
     Input nodes 0..3 are spike sources, not neurons: in every substep input k fires with
     probability ``norm_k * input_rate_max_hz * dt``, from a counter-based random stream keyed
-    by a hash of the genome (so a genome's episode is the same in any batch). Runs in the
-    closed-loop C kernel only (CPU); there is no per-step torch path to record from.
+    by a hash of the genome (``tasks.counter_rng``: a genome's episode is the same in any
+    batch). Whole episodes run in the closed-loop C kernel on CPU (``run_fused``); ``act`` is
+    the readable torch reference, one control step of the whole batch (any device; used to
+    record episodes), and draws the same spikes.
+
+    ``noise_seed`` (0: the stream evolution saw) re-keys every genome's input noise, to test
+    a champion on spike trains it was not selected on.
     """
 
     def __init__(self, genomes: Genomes, config: NEATConfig, spec: MarkovSpikingSpec, tau_s: float,
-                 plant: CartPoleParams) -> None:
+                 plant: CartPoleParams, *, use_fused: bool = True, noise_seed: int = 0) -> None:
         if config.num_inputs != 4 or config.num_outputs != 1:
             raise ValueError("the Markov spiking controller needs num_inputs=4 and num_outputs=1, got "
                              f"{config.num_inputs} and {config.num_outputs}")
         w = genomes.effective_weight()
-        if not (plant_state_ok(w) and loop_available()):
-            raise RuntimeError("the Markov spiking controller runs in the closed-loop C kernel: it needs CPU "
-                               "float32/float64 genomes and a C compiler")
         self.cfg, self.spec, self.plant, self.tau_s = config, spec, plant, tau_s
+        self.loop_fused = use_fused and plant_state_ok(w) and loop_available()
         N = genomes.num_nodes
         flat = w.reshape(-1, N, N)
-        self.keys = genome_keys(flat)  # before compaction: the same genome, the same key, in any batch
+        # Before compaction: the same genome, the same key, in any batch.
+        self.keys = genome_keys(flat) if self.loop_fused else fnv1a_keys(flat)
+        if noise_seed:
+            self.keys = self.keys ^ mix64(torch.tensor(int(noise_seed), dtype=torch.int64))
         self.nodes = torch.nonzero(genomes.node.reshape(-1, N).any(0)).flatten()
         self.w = flat[:, self.nodes][:, :, self.nodes] * (spec.synapse_kick_mv / spec.dt_ms)
         self.out = int(torch.nonzero(self.nodes == config.first_output).flatten()[0])
-        self.threshold_hz = (background_rate_hz(spec.neuron, spec.i_background, spec.dt_ms)
-                             if spec.threshold_hz is None else spec.threshold_hz)
+        self.w_out = self.rest_hz = None
+        bg_hz = background_rate_hz(spec.neuron, spec.i_background, spec.dt_ms)
+        if spec.decoder == "weighted_rate":
+            self.w_out = flat[:, self.nodes][:, :, self.out]
+            rest = torch.full((len(self.nodes),), bg_hz, dtype=torch.float64)
+            rest[self.nodes.cpu() < config.num_inputs] = 0.5 * spec.input_rate_max_hz
+            self.rest_hz = rest
+        if spec.threshold_hz is not None:
+            self.threshold_hz = spec.threshold_hz
+        elif spec.decoder == "weighted_rate":
+            self.threshold_hz = 0.0
+        else:
+            self.threshold_hz = bg_hz
         self.substeps = int(round(tau_s * 1000.0 / spec.dt_ms))
         if abs(self.substeps * spec.dt_ms - tau_s * 1000.0) > 1e-9:
             raise ValueError(f"tau ({tau_s * 1000} ms) must be a whole number of dt_ms ({spec.dt_ms} ms)")
+        B, n = self.w.shape[0], len(self.nodes)
+        self.state = recurrent_init((B, n), spec.neuron, device=w.device, dtype=w.dtype)
+        self.history = torch.zeros(spec.rate_window_steps, B, n, dtype=w.dtype, device=w.device)
+        self.step_index = 0
 
-    def run_fused(self, state0: Tensor, max_steps: int) -> Tensor:
+    def run_fused(self, state0: Tensor, max_steps: int) -> Tensor | None:
+        """Steps balanced per row from ``state0``, by the closed-loop C kernel; None if unavailable."""
+        if not self.loop_fused or self.step_index:
+            return None
         spec = self.spec
         return markov_spiking_loop(
-            self.w, self.keys, state0, num_inputs=self.cfg.num_inputs, output=self.out, max_steps=max_steps,
-            substeps=self.substeps, window=spec.rate_window_steps, dt_ms=spec.dt_ms, neuron=spec.neuron,
-            i_background=spec.i_background, spike_prob_max=spec.input_rate_max_hz * spec.dt_ms / 1000.0,
-            threshold_hz=self.threshold_hz, window_s=self.tau_s, tau_s=self.tau_s, plant=self.plant,
-            observe=MARKOV_OBSERVE, limits=markov_limits(self.plant))
+            self.w, self.w_out, self.rest_hz, self.keys, state0, num_inputs=self.cfg.num_inputs, output=self.out,
+            max_steps=max_steps, substeps=self.substeps, window=spec.rate_window_steps, dt_ms=spec.dt_ms,
+            neuron=spec.neuron, i_background=spec.i_background,
+            spike_prob_max=spec.input_rate_max_hz * spec.dt_ms / 1000.0, threshold_hz=self.threshold_hz,
+            window_s=self.tau_s, tau_s=self.tau_s, plant=self.plant, observe=MARKOV_OBSERVE,
+            limits=markov_limits(self.plant))
 
-    def act(self, plant_state: Tensor):
-        raise NotImplementedError("MarkovSpikingPolicy runs whole episodes in C (closed_loop without record)")
+    def keep(self, rows: Tensor) -> None:
+        self.w, self.keys = self.w[rows], self.keys[rows]
+        if self.w_out is not None:
+            self.w_out = self.w_out[rows]
+        self.state = type(self.state)(*(t[rows] for t in self.state))
+        self.history = self.history[:, rows]
+
+    def act(self, plant_state: Tensor) -> tuple[Tensor, Tensor]:
+        """Force (N) for each batch row, and the spike counts of this control step (inputs
+        included). The same arithmetic, in the same order, as the C kernel."""
+        spec, n_in = self.spec, self.cfg.num_inputs
+        dtype = self.w.dtype
+        p_max = torch.tensor(spec.input_rate_max_hz * spec.dt_ms / 1000.0, dtype=dtype)
+        prob = (normalized_inputs(plant_state.to(dtype), self.plant, MARKOV_OBSERVE, markov_limits(self.plant))
+                * p_max).to(torch.float64)
+        i_ext = torch.full_like(self.state.v, spec.i_background)
+        counts = torch.zeros_like(self.state.v)
+        keys = self.keys.to(self.w.device).unsqueeze(1)
+        base = self.step_index * self.substeps * n_in
+        state = self.state
+        for q in range(self.substeps):
+            counter = torch.arange(base + q * n_in, base + (q + 1) * n_in, device=self.w.device)
+            z_in = (uniform01(keys, counter.unsqueeze(0)) < prob).to(dtype)
+            z = torch.cat([z_in, state.z[:, n_in:]], dim=1)  # the inputs' spikes of this substep
+            z_new, state = recurrent_izhikevich_step(i_ext, state._replace(z=z), self.w, spec.neuron,
+                                                     dt_ms=spec.dt_ms, validate=False)
+            counts = counts + torch.cat([z_in, z_new[:, n_in:]], dim=1)
+        self.state = state
+        window = spec.rate_window_steps
+        self.history[self.step_index % window] = counts
+        self.step_index += 1
+        total = self.history[0]
+        for k in range(1, window):  # slot order, as the kernel sums
+            total = total + self.history[k]
+        denom = torch.tensor(min(self.step_index, window) * self.tau_s, dtype=dtype)
+        rates = total / denom  # Hz
+        if self.w_out is not None:
+            terms = (rates - self.rest_hz.to(rates)) * self.w_out
+            drive = torch.cumsum(terms.to(torch.float64), -1)[:, -1].to(dtype)
+        else:
+            drive = rates[:, self.out]
+        force = torch.where(drive > self.threshold_hz, 10.0, -10.0).to(dtype)
+        return force, counts
 
 
 def plant_state_ok(w: Tensor) -> bool:

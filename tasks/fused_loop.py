@@ -145,37 +145,57 @@ void row_keys(const unsigned char *data, int64_t rows, int64_t bytes_per_row, ui
     }
 }
 
-/* Markov task: n_in Bernoulli input nodes fire in each substep with probability norm * pmax;
-   F = +10 N when the output neuron's rate over the window exceeds thr_hz, else -10 N. */
+/* Markov task: n_in Bernoulli input nodes fire in each substep with probability norm * pmax.
+   wout == NULL: F = +10 N when the output neuron's rate over the window exceeds thr_hz, else -10 N.
+   wout != NULL: the output node decodes, as in the non-Markov task, from the rates r_j of the
+   nodes wired to it (inputs included): F = +10 N when sum_j wout[j] (r_j - rest[j]) exceeds
+   thr_hz, else -10 N. */
 #define DEFINE_MARKOV_LOOP(NAME, SUBSTEP, PLANT, T)                                            \
-void NAME(const T *w, const uint64_t *keys, const T *state0, int64_t *steps, int64_t *status,  \
-          int64_t rows, int64_t n, int64_t n_in, int64_t out, int64_t max_steps,               \
+void NAME(const T *w, const T *wout, const T *rest, const uint64_t *keys, const T *state0, int64_t *steps,    \
+          int64_t *status, int64_t rows, int64_t n, int64_t n_in, int64_t out, int64_t max_steps, \
           int64_t substeps, int64_t window, const int64_t *obs, const T *lim,                   \
           T dt, T a, T b, T c, T d, T vpeak, T ibg, T pmax, T thr_hz, T window_s,              \
           T tau, T g, T total, T mp, T mpl, T l, T xlim, T thlim, int threads) {               \
     _Pragma("omp parallel for schedule(dynamic, 4) num_threads(threads)")                      \
     for (int64_t r = 0; r < rows; ++r) {                                                       \
-        T vv[MAXN], uu[MAXN], zz[MAXN], I[MAXN], cnt[MAXN], hist[16], p[8];                   \
+        T vv[MAXN], uu[MAXN], zz[MAXN], I[MAXN], cnt[MAXN], hist[16 * MAXN], p[8];            \
         const T *W = w + r * n * n;                                                            \
+        const T *WO = wout ? wout + r * n : 0;                                                 \
         T s[4] = {state0[4 * r], state0[4 * r + 1], state0[4 * r + 2], state0[4 * r + 3]};      \
         for (int64_t j = 0; j < n; ++j) { vv[j] = (T)-65.0; uu[j] = b * vv[j]; zz[j] = 0; I[j] = ibg; } \
-        for (int64_t k = 0; k < window; ++k) hist[k] = 0;                                      \
+        for (int64_t k = 0; k < window * n; ++k) hist[k] = 0;                                  \
         uint64_t counter = 0;                                                                  \
         int64_t t = 0; status[r] = 0;                                                          \
         for (; t < max_steps; ++t) {                                                           \
             for (int64_t k = 0; k < n_in; ++k) p[k] = NORM(T, s[obs[k]], lim[k]) * pmax;       \
-            cnt[out] = 0;                                                                      \
+            for (int64_t j = 0; j < n; ++j) cnt[j] = 0;                                        \
             for (int64_t q = 0; q < substeps; ++q) {                                           \
-                for (int64_t k = 0; k < n_in; ++k)                                             \
+                for (int64_t k = 0; k < n_in; ++k) {                                           \
                     zz[k] = uniform01(keys[r], counter++) < (double)p[k] ? (T)1 : (T)0;        \
+                    cnt[k] += zz[k];                                                           \
+                }                                                                              \
                 SUBSTEP(vv, uu, zz, W, I, cnt, n, n_in, dt, a, b, c, d, vpeak);                \
             }                                                                                  \
-            hist[t % window] = cnt[out];                                                       \
+            T *slot = hist + (t % window) * n;                                                 \
+            for (int64_t j = 0; j < n; ++j) slot[j] = cnt[j];                                  \
             int64_t in_window = t + 1 < window ? t + 1 : window;                               \
-            T sum = hist[0];                                                                   \
-            for (int64_t k = 1; k < window; ++k) sum += hist[k];                               \
-            T rate = sum / (T)((double)in_window * (double)window_s);                          \
-            T force = rate > thr_hz ? (T)10.0 : (T)-10.0;                                      \
+            T denom = (T)((double)in_window * (double)window_s);                               \
+            T drive;                                                                           \
+            if (WO) {                                                                          \
+                double acc = 0;                                                                \
+                for (int64_t j = 0; j < n; ++j) {                                              \
+                    if (WO[j] == 0) continue;                                                  \
+                    T sum = hist[j];                                                           \
+                    for (int64_t k = 1; k < window; ++k) sum += hist[k * n + j];               \
+                    acc += (double)((sum / denom - rest[j]) * WO[j]);                          \
+                }                                                                              \
+                drive = (T)acc;                                                                \
+            } else {                                                                           \
+                T sum = hist[out];                                                             \
+                for (int64_t k = 1; k < window; ++k) sum += hist[k * n + out];                 \
+                drive = sum / denom;                                                           \
+            }                                                                                  \
+            T force = drive > thr_hz ? (T)10.0 : (T)-10.0;                                     \
             PLANT(s, force, tau, g, total, mp, mpl, l);                                        \
             if (!(isfinite(s[0]) && isfinite(s[1]) && isfinite(s[2]) && isfinite(s[3]))) {     \
                 status[r] = 1; break;                                                          \
@@ -208,7 +228,7 @@ def loop_available() -> bool:
                             + [ct] * 9 + [ctypes.c_int])
             mk = getattr(_lib, f"markov_loop_{suffix}")
             mk.restype = None
-            mk.argtypes = ([ctypes.c_void_p] * 5 + [ctypes.c_int64] * 7 + [ctypes.c_void_p] * 2 + [ct] * 18
+            mk.argtypes = ([ctypes.c_void_p] * 7 + [ctypes.c_int64] * 7 + [ctypes.c_void_p] * 2 + [ct] * 18
                            + [ctypes.c_int])
         _lib.row_keys.restype = None
         _lib.row_keys.argtypes = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_int64, ctypes.c_void_p]
@@ -290,7 +310,9 @@ def genome_keys(flat: Tensor) -> Tensor:
     return keys
 
 
-def markov_spiking_loop(w: Tensor, keys: Tensor, state0: Tensor, *, num_inputs: int, output: int, max_steps: int,
+def markov_spiking_loop(w: Tensor, w_out: Tensor | None, rest_hz: Tensor | None, keys: Tensor, state0: Tensor, *,
+                        num_inputs: int,
+                        output: int, max_steps: int,
                         substeps: int, window: int, dt_ms: float, neuron, i_background: float,
                         spike_prob_max: float, threshold_hz: float, window_s: float, tau_s: float,
                         plant: CartPoleParams, observe: tuple[int, ...], limits: tuple[float, ...]) -> Tensor:
@@ -301,11 +323,19 @@ def markov_spiking_loop(w: Tensor, keys: Tensor, state0: Tensor, *, num_inputs: 
     dtype = w.dtype
     obs, lim = _observation(observe, limits, dtype)
     w, keys = w.contiguous(), keys.contiguous()
+    if (w_out is None) != (rest_hz is None):
+        raise ValueError("w_out and rest_hz go together (the weighted-rate decoder) or are both None")
+    if w_out is not None:
+        w_out, rest_hz = w_out.to(dtype).contiguous(), rest_hz.to(dtype).contiguous()
+        if w_out.shape != (B, N) or rest_hz.shape != (N,):
+            raise ValueError(f"w_out must be [{B}, {N}] and rest_hz [{N}], got {tuple(w_out.shape)}, "
+                             f"{tuple(rest_hz.shape)}")
     s0 = state0.to(dtype).contiguous()
     steps = torch.empty(B, dtype=torch.int64)
     status = torch.empty(B, dtype=torch.int64)
     fn = _lib.markov_loop_f32 if dtype == torch.float32 else _lib.markov_loop_f64
-    fn(w.data_ptr(), keys.data_ptr(), s0.data_ptr(), steps.data_ptr(), status.data_ptr(), B, N, int(num_inputs),
+    fn(w.data_ptr(), None if w_out is None else w_out.data_ptr(), None if w_out is None else rest_hz.data_ptr(),
+       keys.data_ptr(), s0.data_ptr(), steps.data_ptr(), status.data_ptr(), B, N, int(num_inputs),
        int(output), int(max_steps), int(substeps), int(window), obs.data_ptr(), lim.data_ptr(), float(dt_ms),
        float(neuron.a), float(neuron.b), float(neuron.c), float(neuron.d), float(neuron.v_peak), float(i_background),
        float(spike_prob_max), float(threshold_hz), float(window_s), float(tau_s), *_plant_args(plant),

@@ -232,21 +232,35 @@ def format_markdown(summary: dict, seeds: list[int], command: str) -> str:
 
 
 # --- the report ----------------------------------------------------------------------
-def _record_episode(r: ControllerRuns, task: str, run: int) -> dict:
-    from tasks.controllers import SigmoidPolicy, SigmoidSpec, SpikingPolicy, SpikingSpec, closed_loop
-    from tasks.experiments.cartpole import NONMARKOV, nonmarkov_start
+# Table I episodes last 100,000 steps; its plot shows the first 20 s (the torch reference path
+# records it, about 5 s of compute for the spiking controller).
+MARKOV_RECORD_STEPS = 1000
+
+
+def _record_episode(r: ControllerRuns, task: str, run: int) -> tuple[dict, float]:
+    """One champion's episode from the task's start state, recorded step by step; and tau (s)."""
+    from tasks import controllers as ctl
+    from tasks.experiments import cartpole as cp
 
     one = r.champions.select_runs([run])
-    tau = NONMARKOV["tau_s"]
-    if r.controller == "snn":
-        policy = SpikingPolicy(one, r.config, SpikingSpec(), tau, DEFAULT_PLANT)
+    if task == "table2":
+        tau, steps, start = cp.NONMARKOV["tau_s"], cp.NONMARKOV["max_steps"], cp.nonmarkov_start
+        if r.controller == "snn":
+            policy = ctl.SpikingPolicy(one, r.config, ctl.SpikingSpec(), tau, DEFAULT_PLANT)
+        else:
+            policy = ctl.SigmoidPolicy(one, r.config, ctl.SigmoidSpec(), DEFAULT_PLANT, tau_s=tau)
     else:
-        policy = SigmoidPolicy(one, r.config, SigmoidSpec(), DEFAULT_PLANT, tau_s=tau)
-    _, trace = closed_loop(policy, nonmarkov_start(1, dtype=one.weight.dtype), tau_s=tau,
-                           max_steps=NONMARKOV["max_steps"], record=True)
+        tau, steps, start = cp.MARKOV["tau_s"], MARKOV_RECORD_STEPS, cp.markov_start
+        if r.controller == "snn":
+            policy = ctl.MarkovSpikingPolicy(one, r.config, ctl.MarkovSpikingSpec(), tau, DEFAULT_PLANT)
+        else:
+            policy = ctl.SigmoidPolicy(one, r.config, ctl.SigmoidSpec(), DEFAULT_PLANT, tau_s=tau,
+                                       observe=ctl.MARKOV_OBSERVE, limits=ctl.markov_limits(DEFAULT_PLANT),
+                                       bang_bang=True)
+    _, trace = ctl.closed_loop(policy, start(1, dtype=one.weight.dtype), tau_s=tau, max_steps=steps, record=True)
     trace = {k: v[:, 0] for k, v in trace.items()}
     trace["nodes"] = getattr(policy, "nodes", None)
-    return trace
+    return trace, tau
 
 
 def _example_run(r: ControllerRuns) -> int:
@@ -331,16 +345,17 @@ def write_report(results: dict[str, ControllerRuns], table: str, out: str | os.P
         run = _example_run(r)
         label = f"{LABELS.get(c, c)}, seed {r.seeds[run]}" + (
             f", solved at generation {r.solved_generation[run]}" if r.solved_generation[run] > 0 else ", not solved")
-        if table == "table2":
-            tr = _record_episode(r, table, run)
-            tau = 0.01
-            if c == "snn":
-                names = [f"node {int(n)}" for n in tr["nodes"]]
-                fig = plot_episode(tr["activity"], tr["x"], tr["theta"], tr["force"], tau_s=tau, names=names,
-                                   title=label)
-            else:
-                fig = plot_trajectory(tr["x"], tr["theta"], tr["force"], tau_s=tau, title=label)
-            written.append(save_figure(fig, out / f"trajectory_{c}.png"))
+        tr, tau = _record_episode(r, table, run)
+        if table == "table1":
+            label += f" (first {len(tr['x']) * tau:g} s)"
+        if c == "snn":
+            node_names = {0: "x", 1: "θ"} if r.config.num_inputs == 2 else {0: "x", 1: "ẋ", 2: "θ", 3: "θ̇"}
+            node_names[r.config.first_output] = "out"
+            names = [f"{node_names.get(int(n), 'hidden')} ({int(n)})" for n in tr["nodes"]]
+            fig = plot_episode(tr["activity"], tr["x"], tr["theta"], tr["force"], tau_s=tau, names=names, title=label)
+        else:
+            fig = plot_trajectory(tr["x"], tr["theta"], tr["force"], tau_s=tau, title=label)
+        written.append(save_figure(fig, out / f"trajectory_{c}.png"))
         names = {0: "x", 1: "θ"} if r.config.num_inputs == 2 else {0: "x", 1: "ẋ", 2: "θ", 3: "θ̇"}
         names[r.config.first_output] = "F"
         written.append(save_figure(plot_topology(r.champions, r.config, run, 0, labels=names,

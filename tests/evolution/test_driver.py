@@ -54,6 +54,18 @@ def test_run_in_a_batch_equals_the_run_alone_bitwise():
         _same(batch, alone, ra=slice(r, r + 1))
 
 
+def test_reproduction_in_run_chunks_equals_one_chunk():
+    seeds = [21, 22, 23, 24, 25]
+    whole = _run(seeds)
+    chunked = NEAT(CFG, seeds=seeds)
+    chunked.reproduce_chunk_genomes = 2 * CFG.pop_size  # chunks of 2, 2 and 1 runs
+    stats = chunked.add_reporter(StatisticsReporter())
+    chunked.run(fitness_fn, 8)
+    _same(whole, chunked)
+    assert len(stats.rows) == 8 * len(seeds)
+    assert not torch.equal(whole.genomes.weight[0], whole.genomes.weight[1])
+
+
 def test_solved_runs_freeze_and_match_running_alone():
     # XOR: runs solve at different generations, then stop evolving; the others go on.
     from tasks.xor import xor_solved

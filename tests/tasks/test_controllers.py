@@ -80,3 +80,81 @@ def test_spec_validation():
     g = _population(SNN_CFG)
     with pytest.raises(ValueError, match="whole number"):
         SpikingPolicy(g, SNN_CFG, SpikingSpec(dt_ms=0.3), 0.01, PLANT)
+
+
+def _markov_hand_wired(weights):
+    """The Markov start genome (inputs x, x_dot, theta, theta_dot wired to the output) with
+    the given input weights, one genome per row of ``weights``."""
+    from tasks.experiments.cartpole import markov_config
+
+    cfg = markov_config("snn", pop_size=len(weights))
+    g = NEAT(cfg, seeds=[0]).ask()
+    g.weight[0, :, :4, cfg.first_output] = torch.tensor(weights)
+    assert bool(g.enabled[0, :, :4, cfg.first_output].all())
+    return g, cfg
+
+
+def test_markov_weighted_rate_decoder_pushes_towards_balance():
+    """A stabilising linear law (push the cart the way the pole and cart drift) holds the pole;
+    the same weights negated drop it at once. Rates are taken relative to rest, so an
+    all-positive weight vector is not simply 'always +10 N'."""
+    from tasks.controllers import MarkovSpikingPolicy, MarkovSpikingSpec
+    from tasks.experiments.cartpole import markov_start
+
+    g, cfg = _markov_hand_wired([(2.0, 1.0, 4.0, 6.0), (-2.0, -1.0, -4.0, -6.0), (1.0, 1.0, 1.0, 1.0)])
+    spec = MarkovSpikingSpec(input_rate_max_hz=2000.0)  # one spike per 0.5 ms substep at input 1
+    steps, _ = closed_loop(MarkovSpikingPolicy(g, cfg, spec, 0.02, PLANT), markov_start(3), tau_s=0.02,
+                           max_steps=20_000)
+    assert steps[0] == 20_000
+    assert steps[1] < 50
+    assert 0 < steps[2] < 20_000  # too little theta feedback: balances a while, then falls
+
+
+def test_markov_row_result_does_not_depend_on_batch():
+    from tasks.controllers import MarkovSpikingPolicy, MarkovSpikingSpec
+    from tasks.experiments.cartpole import markov_config, markov_start
+
+    cfg = markov_config("snn", pop_size=12, node_add_prob=0.5, conn_add_prob=0.5)
+    neat = NEAT(cfg, seeds=[0, 1])
+    neat.run(lambda g: g.num_genes().double(), 3)  # grow some structure
+    g = neat.genomes
+    for decoder in ("weighted_rate", "output_neuron"):
+        spec = MarkovSpikingSpec(decoder=decoder)
+        steps, _ = closed_loop(MarkovSpikingPolicy(g, cfg, spec, 0.02, PLANT), markov_start(24), tau_s=0.02,
+                               max_steps=2000)
+        assert len(set(steps.tolist())) > 2
+        for r, p in [(0, 0), (0, 5), (1, 11)]:
+            one = g.select_runs([r]).gather(torch.tensor([[p]]))
+            alone, _ = closed_loop(MarkovSpikingPolicy(one, cfg, spec, 0.02, PLANT), markov_start(1), tau_s=0.02,
+                                   max_steps=2000)
+            assert alone.item() == steps[r * 12 + p].item()
+
+
+def test_markov_spec_validation():
+    from tasks.controllers import MarkovSpikingSpec
+
+    with pytest.raises(ValueError, match="decoder"):
+        MarkovSpikingSpec(decoder="mean")
+    with pytest.raises(ValueError, match="input_rate_max_hz"):
+        MarkovSpikingSpec(input_rate_max_hz=2500.0)
+
+
+def test_markov_noise_seed_redraws_the_input_spikes():
+    from tasks.controllers import MarkovSpikingPolicy, MarkovSpikingSpec
+    from tasks.experiments.cartpole import markov_start
+    from tasks.experiments.markov_noise_retest import retest_steps
+
+    g, cfg = _markov_hand_wired([(2.0, 1.0, 4.0, 6.0), (1.0, 1.0, 1.0, 1.0), (0.5, 0.5, 2.0, 1.0)])
+    spec = MarkovSpikingSpec()
+
+    def steps(noise_seed, fused=True):
+        policy = MarkovSpikingPolicy(g, cfg, spec, 0.02, PLANT, noise_seed=noise_seed, use_fused=fused)
+        return closed_loop(policy, markov_start(3), tau_s=0.02, max_steps=3000)[0]
+
+    assert torch.equal(steps(0), steps(0))
+    assert torch.equal(steps(7), steps(7))
+    assert not torch.equal(steps(0), steps(7))  # a fresh realisation of the spike trains
+    champions = type(g)(**{k: v.reshape(3, 1, *v.shape[2:]) for k, v in g.tensors().items()})
+    retest = retest_steps(champions, 2, max_steps=3000)
+    assert retest.shape == (3, 2)
+    assert torch.equal(retest[:, 0], steps(1)) and torch.equal(retest[:, 1], steps(2))

@@ -223,8 +223,11 @@ def test_cluster_lost_mid_run_then_local_resume(long_reference, tmp_path):
             driver = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
             try:
                 # 4 shards on 2 CPUs: once a third shard has checkpointed, one has finished
-                third = out / "shards" / f"{CONTROLLER}-2" / f"{CONTROLLER}.ckpt"
-                _wait_for(lambda: third.exists() or driver.poll() is not None, 120, "a third shard")
+                # (Ray does not start the shards in index order)
+                def started():
+                    return len(list(out.glob(f"shards/{CONTROLLER}-*/{CONTROLLER}.ckpt")))
+
+                _wait_for(lambda: started() >= 3 or driver.poll() is not None, 120, "a third shard")
                 doomed.stop()
                 lost_at = time.monotonic()
                 rc = driver.wait(timeout=90)
@@ -239,10 +242,11 @@ def test_cluster_lost_mid_run_then_local_resume(long_reference, tmp_path):
         doomed.stop()
     assert f"snn-neat reproduce: error: --ray '{doomed.address}': lost the Ray cluster" in text, text[-3000:]
     assert "--resume" in text
-    finished = text.split("Finished shards", 1)[1]
-    assert f"{CONTROLLER} shard 1/4 (seeds 0)" in finished or f"{CONTROLLER} shard 2/4 (seeds 1)" in finished
-    assert f"{CONTROLLER} shard 3/4" not in finished and f"{CONTROLLER} shard 4/4" not in finished
-    assert (out / "shards" / f"{CONTROLLER}-0" / f"{CONTROLLER}.ckpt").exists()
+    finished = text.split("Finished shards", 1)[1].split(". Run the same command", 1)[0]
+    done = [k for k in range(4) if f"{CONTROLLER} shard {k + 1}/4 (seeds {k})" in finished]
+    assert 1 <= len(done) < 4, finished
+    for k in done:  # a finished shard's results stay on disk
+        assert (out / "shards" / f"{CONTROLLER}-{k}" / f"{CONTROLLER}.ckpt").exists()
 
     from tasks.cli import main
 

@@ -91,3 +91,44 @@ def test_kernels_can_be_turned_off(monkeypatch):
     monkeypatch.setattr(cbuild, "_cache", {})
     g, cfg = _evolved("snn", generations=0)
     assert not _policy("snn", g, cfg, True).loop_fused
+
+
+def _markov_evolved(dtype):
+    from tasks.experiments.cartpole import markov_config, markov_fitness
+
+    cfg = markov_config("snn", pop_size=30)
+    neat = NEAT(cfg, seeds=[3], dtype=dtype)
+    fit = markov_fitness("snn", cfg, max_steps=300)
+    for _ in range(3):
+        neat.tell(fit(neat.ask()))
+    return neat.ask(), cfg
+
+
+@pytest.mark.parametrize("spec_kw", [{}, {"decoder": "output_neuron"}, {"rate_window_steps": 3, "input_rate_max_hz": 2000.0}])
+def test_markov_kernel_equals_torch_reference_float64(spec_kw):
+    """The Markov C kernel and the torch reference (``act``) draw the same input spikes and
+    balance every genome for the same number of steps."""
+    from tasks.controllers import MarkovSpikingPolicy, MarkovSpikingSpec
+    from tasks.experiments.cartpole import markov_start
+
+    g, cfg = _markov_evolved(torch.float64)
+    spec = MarkovSpikingSpec(**spec_kw)
+    B = g.num_runs * g.pop_size
+    start = markov_start(B, dtype=torch.float64)
+    fused = MarkovSpikingPolicy(g, cfg, spec, 0.02, DEFAULT_PLANT)
+    assert fused.loop_fused
+    steps_fused, _ = closed_loop(fused, start, tau_s=0.02, max_steps=150)
+    reference = MarkovSpikingPolicy(g, cfg, spec, 0.02, DEFAULT_PLANT, use_fused=False)
+    steps_ref, _ = closed_loop(reference, start, tau_s=0.02, max_steps=150)
+    assert len(set(steps_ref.tolist())) > 3  # genomes that differ, some of which last
+    assert torch.equal(steps_fused, steps_ref)
+
+
+def test_torch_genome_keys_equal_the_kernels():
+    from tasks.counter_rng import fnv1a_keys
+    from tasks.fused_loop import genome_keys
+
+    x = torch.randn(7, 5, 5, generator=torch.Generator().manual_seed(0))
+    assert torch.equal(fnv1a_keys(x), genome_keys(x))
+    assert len(set(fnv1a_keys(x).tolist())) == 7
+    assert torch.equal(fnv1a_keys(x[3:4]), fnv1a_keys(x)[3:4])

@@ -56,6 +56,16 @@ def test_short_reproduction_writes_every_artefact(tmp_path, capsys):
               "--quiet"])
 
 
+def test_short_markov_reproduction_writes_trajectories(tmp_path):
+    out = tmp_path / "t1"
+    assert main(["reproduce", "table1", "--runs", "2", "--generations", "2", "--seed", "100",
+                 "--out", str(out), "--quiet", "--threads", "1"]) == 0
+    for name in ("table1.md", "fig8_best_fitness.png", "trajectory_snn.png", "trajectory_sigmoid.png",
+                 "topology_snn.png", "topology_sigmoid.png"):
+        assert (out / name).stat().st_size > (10_000 if name.endswith(".png") else 100), name
+    assert "| NEAT-SNN | paper | 1 | 92 | 9.5 | 16.55 | 1/60 |" in (out / "table1.md").read_text()
+
+
 def test_resume_rejects_a_different_reproduction(tmp_path):
     run_controller("table2", "sigmoid", [0, 1], 2, tmp_path, progress=False)
     with pytest.raises(ReproduceError, match="seeds"):
