@@ -39,6 +39,12 @@ DEFINE_PLANT(plant_f64, double)
 
 #define NORM(T, v, lim) ({ T q_ = ((v) / (lim) + (T)1.0) * (T)0.5; q_ < 0 ? (T)0 : (q_ > 1 ? (T)1 : q_); })
 
+/* SIZE_CASES(CALL): `case k: CALL; break;` for k = 4..12 and 16, with N_ standing for k. */
+#define SIZE_CASE(K, CALL) case K: { enum { N_ = K }; CALL; break; }
+#define SIZE_CASES(CALL) SIZE_CASE(4, CALL) SIZE_CASE(5, CALL) SIZE_CASE(6, CALL) SIZE_CASE(7, CALL) \
+    SIZE_CASE(8, CALL) SIZE_CASE(9, CALL) SIZE_CASE(10, CALL) SIZE_CASE(11, CALL) SIZE_CASE(12, CALL) \
+    SIZE_CASE(16, CALL)
+
 /* status[r]: 0 ok, 1 the plant produced NaN or inf. */
 #define DEFINE_SNN_LOOP(NAME, ROW, PLANT, T, SIN, COS, EXP)                                    \
 void NAME(const T *w, const T *wout, const T *sigma, const T *state0, int64_t *steps,         \
@@ -58,7 +64,11 @@ void NAME(const T *w, const T *wout, const T *sigma, const T *state0, int64_t *s
             for (int64_t j = 0; j < n; ++j) I[j] = ibg;                                        \
             I[0] = ibg + imax * xn; I[1] = ibg + imax * thn;                                   \
             for (int64_t j = 0; j < n; ++j) cnt[j] = 0;                                        \
-            ROW(vv, uu, zz, W, I, cnt, n, substeps, dt, a, b, c, d, vpeak);                    \
+            /* a constant n for the usual sizes lets the compiler unroll and vectorise */   \
+            switch (n) {                                                                   \
+                SIZE_CASES(ROW(vv, uu, zz, W, I, cnt, N_, substeps, dt, a, b, c, d, vpeak))   \
+                default: ROW(vv, uu, zz, W, I, cnt, n, substeps, dt, a, b, c, d, vpeak);      \
+            }                                                                              \
             T *slot = hist + (t % window) * n;                                                 \
             for (int64_t j = 0; j < n; ++j) slot[j] = cnt[j];                                  \
             int64_t in_window = t + 1 < window ? t + 1 : window;                               \
@@ -174,7 +184,10 @@ void NAME(const T *w, const T *wout, const T *rest, const uint64_t *keys, const 
                     zz[k] = uniform01(keys[r], counter++) < (double)p[k] ? (T)1 : (T)0;        \
                     cnt[k] += zz[k];                                                           \
                 }                                                                              \
-                SUBSTEP(vv, uu, zz, W, I, cnt, n, n_in, dt, a, b, c, d, vpeak);                \
+                switch (n) {                                                               \
+                    SIZE_CASES(SUBSTEP(vv, uu, zz, W, I, cnt, N_, n_in, dt, a, b, c, d, vpeak)) \
+                    default: SUBSTEP(vv, uu, zz, W, I, cnt, n, n_in, dt, a, b, c, d, vpeak);  \
+                }                                                                          \
             }                                                                                  \
             T *slot = hist + (t % window) * n;                                                 \
             for (int64_t j = 0; j < n; ++j) slot[j] = cnt[j];                                  \
