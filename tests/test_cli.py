@@ -50,9 +50,22 @@ def test_evolve_writes_statistics_and_a_loadable_champion(tmp_path):
     assert champion.conn.sum() >= 2
 
 
+def test_evolve_markov_task(tmp_path, capsys):
+    from evolution.genome_io import load_genome
+    from tasks.experiments.cartpole import markov_config
+
+    assert main(["evolve", "--task", "markov", "--controller", "sigmoid", "--generations", "2", "--seed", "3",
+                 "--out", str(tmp_path), "--verbose"]) == 0
+    champion = load_genome(tmp_path / "champion.json", markov_config("sigmoid"))
+    assert champion.num_nodes == markov_config("sigmoid").num_nodes
+    assert bool(champion.conn[0, 0, :4, markov_config("sigmoid").first_output].all())  # all four inputs wired
+    assert "sigmoid seed 3" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("argv, match", [
     (["evolve", "--device", "nope"], "--device 'nope'"),
     (["evolve", "--generations", "0"], "--generations"),
+    (["evolve", "--task", "pendulum"], "--task"),
     (["xor", "--runs", "-3"], "--runs"),
 ])
 def test_bad_options_are_named(argv, match, capsys):
