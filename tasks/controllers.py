@@ -1,7 +1,8 @@
 """Controllers for the paper's cart-pole tasks, and the closed loop that evaluates them.
 
-Every gap the paper leaves is chosen once, here, in ``SpikingSpec`` (spiking controllers)
-and ``SigmoidSpec`` (the sigmoid NEAT baselines), with the reason beside each value.
+Every gap the paper leaves is chosen once, here, in ``SpikingSpec`` and ``MarkovSpikingSpec``
+(spiking controllers) and ``SigmoidSpec`` (the sigmoid NEAT baselines), with the reason
+beside each value.
 
 Non-Markov task (Table II), NEAT-SNN: x and theta are normalised to [0, 1] over the failure
 limits and injected as currents into the two input neurons; every neuron gets a background
@@ -9,9 +10,15 @@ current; the force is ``F = 10 (2 sigmoid(sigma * sum_i w_i r_i) - 1)`` over the
 wired to the output node, with ``r_i`` their firing rates (Hz) over the last few control
 steps and ``sigma`` evolved per genome.
 
+Markov task (Table I), NEAT-SNN (``MarkovSpikingSpec``): the four state variables drive
+four Bernoulli spike sources; the output node decodes as in Table II, from the rates of the
+nodes wired to it taken relative to their rates at rest, with a bang-bang force
+``F = +-10 N`` on the sign of ``sum_i w_i (r_i - r_rest,i)``.
+
 Sigmoid NEAT (baseline): the same normalised inputs plus a bias input, a recurrent sigmoid
 network updated once per control step (state carried across steps, NEAT's usual setting
-for pole balancing), ``F = 10 (2 y - 1)`` from the output ``y`` in (0, 1).
+for pole balancing), ``F = 10 (2 y - 1)`` from the output ``y`` in (0, 1) (Table I:
+``F = +-10 N`` on ``y > 0.5``).
 """
 
 from __future__ import annotations
