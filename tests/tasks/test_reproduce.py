@@ -119,3 +119,19 @@ def test_mann_whitney_and_counting():
     assert r.counted() == [5, 101, 30]
     row = r.row()
     assert (row["best"], row["worst"], row["median"], row["failure_rate"]) == (5, 101, 30, "1/3")
+
+
+def test_sensitivity_sweep_rows_and_cli(capsys):
+    from tasks.experiments.sensitivity import main as sensitivity_main
+    from tasks.experiments.sensitivity import sweep
+
+    rows = sweep("table2", "weight_mutate_power", [0.5, 2.5], [0, 1, 2], generations=3)
+    assert [(r["value"], r["controller"]) for r in rows] == [(0.5, "snn"), (0.5, "sigmoid"), (2.5, "snn"),
+                                                               (2.5, "sigmoid")]
+    for r in rows:
+        assert r["runs"] == 3 and 0 <= r["failures"] <= 3 and 1 <= r["median"] <= 4
+    assert 0.0 <= rows[1]["p_value"] <= 1.0 and "p_value" not in rows[0]
+    sensitivity_main(["table2", "--param", "weight_mutate_power", "--values", "1", "--seeds", "0-1",
+                      "--generations", "2", "--controllers", "sigmoid"])
+    out = capsys.readouterr().out
+    assert "weight_mutate_power in [1.0]" in out and "sigmoid" in out
