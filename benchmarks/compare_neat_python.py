@@ -68,7 +68,7 @@ def ours(kind: str, genomes: Genomes, cfg: NEATConfig, steps: int, fused: bool) 
     return elapsed
 
 
-def _plant_step(s: list[float], force: float) -> list[float]:
+def plant_step(s: list[float], force: float, tau: float = TAU) -> list[float]:
     # The same explicit Euler as tasks.cartpole, in Python floats (what a neat-python user writes).
     x, xd, th, thd = s
     total, mp, length = 1.1, 0.1, 0.5
@@ -76,7 +76,7 @@ def _plant_step(s: list[float], force: float) -> list[float]:
     temp = (-force - mp * length * thd * thd * sn) / total
     thacc = (9.8 * sn + cs * temp) / (length * (4.0 / 3.0 - mp * cs * cs / total))
     xacc = (force + mp * length * (thd * thd * sn - thacc * cs)) / total
-    return [x + TAU * xd, xd + TAU * xacc, th + TAU * thd, thd + TAU * thacc]
+    return [x + tau * xd, xd + tau * xacc, th + tau * thd, thd + tau * thacc]
 
 
 def _norm(s: list[float]) -> list[float]:
@@ -113,7 +113,7 @@ def neat_python(kind: str, genomes: Genomes, count: int, steps: int) -> float:
                 force = 10.0 * (2.0 / (1.0 + math.exp(-0.005 * fired * 100.0)) - 1.0)
             else:
                 force = 10.0 * (2.0 * net.activate(_norm(s))[0] - 1.0)
-            s = _plant_step(s, force)
+            s = plant_step(s, force)
     return time.perf_counter() - t0
 
 

@@ -28,6 +28,8 @@ import statistics
 import tempfile
 import time
 
+from compare_neat_python import plant_step  # the plant in Python floats (same folder)
+
 TASKS = {
     # observed state indices, normalisation bounds, tau (s), success steps, bang-bang
     "markov": ((0, 1, 2, 3), (2.4, 1.5, math.radians(12.0), 2.0), 0.02, 100_000, True),
@@ -96,17 +98,6 @@ survival_threshold = 0.2
 """
 
 
-def _plant_step(s: list[float], force: float, tau: float) -> list[float]:
-    # tasks.cartpole.cartpole_step in Python floats.
-    x, xd, th, thd = s
-    total, mp, length = 1.1, 0.1, 0.5
-    sn, cs = math.sin(th), math.cos(th)
-    temp = (-force - mp * length * thd * thd * sn) / total
-    thacc = (9.8 * sn + cs * temp) / (length * (4.0 / 3.0 - mp * cs * cs / total))
-    xacc = (force + mp * length * (thd * thd * sn - thacc * cs)) / total
-    return [x + tau * xd, xd + tau * xacc, th + tau * thd, thd + tau * thacc]
-
-
 def episode(net, task: str) -> int:
     """Control steps balanced from theta = 3 degrees."""
     obs, lim, tau, max_steps, bang = TASKS[task]
@@ -114,7 +105,7 @@ def episode(net, task: str) -> int:
     for t in range(max_steps):
         y = net.activate([min(max((s[k] / b + 1.0) * 0.5, 0.0), 1.0) for k, b in zip(obs, lim, strict=True)])[0]
         force = (10.0 if y > 0.5 else -10.0) if bang else 10.0 * (2.0 * y - 1.0)
-        s = _plant_step(s, force, tau)
+        s = plant_step(s, force, tau)
         if abs(s[0]) > 2.4 or abs(s[2]) > math.radians(12.0):
             return t
     return max_steps
