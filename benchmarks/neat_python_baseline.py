@@ -37,7 +37,7 @@ TASKS = {
 }
 
 
-def _config_text(num_inputs: int, threshold: int) -> str:
+def _config_text(num_inputs: int, threshold: int, elitism: int = 2) -> str:
     return f"""
 [NEAT]
 fitness_criterion = max
@@ -93,7 +93,7 @@ species_fitness_func = max
 max_stagnation = 20
 species_elitism = 2
 [DefaultReproduction]
-elitism = 2
+elitism = {elitism}
 survival_threshold = 0.2
 """
 
@@ -111,7 +111,7 @@ def episode(net, task: str) -> int:
     return max_steps
 
 
-def run_seed(task: str, seed: int, generations: int, self_loops: bool) -> int:
+def run_seed(task: str, seed: int, generations: int, self_loops: bool, elitism: int = 2) -> int:
     """The generation (1 = the initial population) at which ``seed`` solved, or -1."""
     import neat
 
@@ -124,7 +124,7 @@ def run_seed(task: str, seed: int, generations: int, self_loops: bool) -> int:
 
     obs, _, _, max_steps, _ = TASKS[task]
     with tempfile.NamedTemporaryFile("w", suffix=".ini", delete=False) as f:
-        f.write(_config_text(len(obs), max_steps))
+        f.write(_config_text(len(obs), max_steps, elitism))
     try:
         config = neat.Config(PaperStartGenome, neat.DefaultReproduction, neat.DefaultSpeciesSet,
                              neat.DefaultStagnation, f.name)
@@ -158,17 +158,19 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seeds", type=_seeds, default=_seeds("0-11"), help="e.g. 0-29 (default 0-11)")
     ap.add_argument("--generations", type=int, default=100)
     ap.add_argument("--self-loops", action="store_true", help="keep neat-python's self-connections at the start")
+    ap.add_argument("--elitism", type=int, default=2,
+                    help="neat-python's per-species elitism (default 2, its own; 1 is closer to the paper's)")
     args = ap.parse_args(argv)
     solved = []
     for seed in args.seeds:
         start = time.perf_counter()
-        g = run_seed(args.task, seed, args.generations, args.self_loops)
+        g = run_seed(args.task, seed, args.generations, args.self_loops, args.elitism)
         solved.append(g)
         print(f"seed {seed}: " + (f"solved at generation {g}" if g > 0 else "not solved")
               + f" ({time.perf_counter() - start:.0f} s)", flush=True)
     counted = [g if g > 0 else args.generations + 1 for g in solved]
     fails = sum(g < 0 for g in solved)
-    print(f"neat-python 2.0.0, {args.task}{' (self-loop start)' if args.self_loops else ''}, seeds "
+    print(f"neat-python 2.0.0, {args.task}{' (self-loop start)' if args.self_loops else ''}, elitism {args.elitism}, seeds "
           f"{args.seeds[0]}-{args.seeds[-1]}: failures {fails}/{len(solved)}, median {statistics.median(counted):g}, "
           f"mean {statistics.mean(counted):.2f} generations (failures as {args.generations + 1})")
 
