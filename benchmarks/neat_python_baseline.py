@@ -30,6 +30,8 @@ import time
 
 from compare_neat_python import plant_step  # the plant in Python floats (same folder)
 
+from tasks.experiments.sensitivity import seed_range
+
 TASKS = {
     # observed state indices, normalisation bounds, tau (s), success steps, bang-bang
     "markov": ((0, 1, 2, 3), (2.4, 1.5, math.radians(12.0), 2.0), 0.02, 100_000, True),
@@ -147,15 +149,10 @@ def run_seed(task: str, seed: int, generations: int, self_loops: bool, elitism: 
     return state["solved"]
 
 
-def _seeds(text: str) -> list[int]:
-    lo, _, hi = text.partition("-")
-    return list(range(int(lo), int(hi or lo) + 1))
-
-
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--task", choices=sorted(TASKS), default="markov")
-    ap.add_argument("--seeds", type=_seeds, default=_seeds("0-11"), help="e.g. 0-29 (default 0-11)")
+    ap.add_argument("--seeds", type=seed_range, default=seed_range("0-11"), help="e.g. 0-29 (default 0-11)")
     ap.add_argument("--generations", type=int, default=100)
     ap.add_argument("--self-loops", action="store_true", help="keep neat-python's self-connections at the start")
     ap.add_argument("--elitism", type=int, default=2,

@@ -398,11 +398,12 @@ class MarkovSpikingPolicy:
         i_ext = torch.full_like(self.state.v, spec.i_background)
         counts = torch.zeros_like(self.state.v)
         keys = self.keys.to(self.w.device).unsqueeze(1)
-        base = self.step_index * self.substeps * n_in
+        # Draw k of substep q of control step t is counter (t * substeps + q) * n_in + k.
+        counters = torch.arange(self.substeps * n_in, device=self.w.device).view(self.substeps, 1, n_in)
+        counters = counters + self.step_index * self.substeps * n_in
         state = self.state
         for q in range(self.substeps):
-            counter = torch.arange(base + q * n_in, base + (q + 1) * n_in, device=self.w.device)
-            z_in = (uniform01(keys, counter.unsqueeze(0)) < prob).to(dtype)
+            z_in = (uniform01(keys, counters[q]) < prob).to(dtype)
             z = torch.cat([z_in, state.z[:, n_in:]], dim=1)  # the inputs' spikes of this substep
             z_new, state = recurrent_izhikevich_step(i_ext, state._replace(z=z), self.w, spec.neuron,
                                                      dt_ms=spec.dt_ms, validate=False)

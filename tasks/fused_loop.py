@@ -45,8 +45,31 @@ DEFINE_PLANT(plant_f64, double)
     SIZE_CASE(8, CALL) SIZE_CASE(9, CALL) SIZE_CASE(10, CALL) SIZE_CASE(11, CALL) SIZE_CASE(12, CALL) \
     SIZE_CASE(16, CALL)
 
+/* Rate decoding over the window of the last `window` control steps (hist[k * n + j]: spikes
+   of node j in slot k), summed in slot order as the torch reference does. */
+#define DEFINE_DECODE(SUFFIX, T)                                                               \
+static inline T window_rate_##SUFFIX(const T *hist, int64_t window, int64_t n, int64_t j, T denom) { \
+    T sum = hist[j];                                                                           \
+    for (int64_t k = 1; k < window; ++k) sum += hist[k * n + j];                               \
+    return sum / denom;                                                                        \
+}                                                                                              \
+/* sum_j wo[j] (r_j - rest[j]) (rest NULL: 0), accumulated in double over j ascending. */      \
+static inline T weighted_rate_##SUFFIX(const T *hist, int64_t window, int64_t n, T denom,       \
+                                       const T *wo, const T *rest) {                           \
+    double acc = 0;                                                                            \
+    for (int64_t j = 0; j < n; ++j) {                                                          \
+        if (wo[j] == 0) continue; /* an absent connection adds exactly 0 */                    \
+        T rate = window_rate_##SUFFIX(hist, window, n, j, denom);                              \
+        if (rest) rate = rate - rest[j];                                                       \
+        acc += (double)(rate * wo[j]);                                                         \
+    }                                                                                          \
+    return (T)acc;                                                                             \
+}
+DEFINE_DECODE(f32, float)
+DEFINE_DECODE(f64, double)
+
 /* status[r]: 0 ok, 1 the plant produced NaN or inf. */
-#define DEFINE_SNN_LOOP(NAME, ROW, PLANT, T, SIN, COS, EXP)                                    \
+#define DEFINE_SNN_LOOP(NAME, ROW, PLANT, T, SIN, COS, EXP, SUFFIX)                                    \
 void NAME(const T *w, const T *wout, const T *sigma, const T *state0, int64_t *steps,         \
           int64_t *status, int64_t rows, int64_t n, int64_t max_steps, int64_t substeps,      \
           int64_t window, T dt, T a, T b, T c, T d, T vpeak, T ibg, T imax, T window_s,        \
@@ -73,13 +96,7 @@ void NAME(const T *w, const T *wout, const T *sigma, const T *state0, int64_t *s
             for (int64_t j = 0; j < n; ++j) slot[j] = cnt[j];                                  \
             int64_t in_window = t + 1 < window ? t + 1 : window;                               \
             T denom = (T)((double)in_window * (double)window_s);                               \
-            double acc = 0;                                                                    \
-            for (int64_t j = 0; j < n; ++j) {                                                  \
-                T sum = hist[j];                                                               \
-                for (int64_t k = 1; k < window; ++k) sum += hist[k * n + j];                   \
-                acc += (double)((sum / denom) * WO[j]);                                        \
-            }                                                                                  \
-            T drive = (T)acc;                                                                  \
+            T drive = weighted_rate_##SUFFIX(hist, window, n, denom, WO, 0);                   \
             T fn = (T)1 / ((T)1 + EXP(-(sigma[r] * drive)));                                   \
             T force = (T)10.0 * ((T)2.0 * fn - (T)1.0);                                        \
             PLANT(s, force, tau, g, total, mp, mpl, l);                                                \
@@ -91,8 +108,8 @@ void NAME(const T *w, const T *wout, const T *sigma, const T *state0, int64_t *s
         steps[r] = t;                                                                          \
     }                                                                                          \
 }
-DEFINE_SNN_LOOP(snn_loop_f32, izh_f32_row, plant_f32, float, sinf, cosf, expf)
-DEFINE_SNN_LOOP(snn_loop_f64, izh_f64_row, plant_f64, double, sin, cos, exp)
+DEFINE_SNN_LOOP(snn_loop_f32, izh_f32_row, plant_f32, float, sinf, cosf, expf, f32)
+DEFINE_SNN_LOOP(snn_loop_f64, izh_f64_row, plant_f64, double, sin, cos, exp, f64)
 
 #define DEFINE_SIG_LOOP(NAME, PLANT, T, EXP)                                                   \
 /* inputs: state variables obs[k] scaled by lim[k] to [0, 1]; bang: F = +-10 N on y > 0.5 */   \
@@ -160,7 +177,7 @@ void row_keys(const unsigned char *data, int64_t rows, int64_t bytes_per_row, ui
    wout != NULL: the output node decodes, as in the non-Markov task, from the rates r_j of the
    nodes wired to it (inputs included): F = +10 N when sum_j wout[j] (r_j - rest[j]) exceeds
    thr_hz, else -10 N. */
-#define DEFINE_MARKOV_LOOP(NAME, SUBSTEP, PLANT, T)                                            \
+#define DEFINE_MARKOV_LOOP(NAME, SUBSTEP, PLANT, T, SUFFIX)                                            \
 void NAME(const T *w, const T *wout, const T *rest, const uint64_t *keys, const T *state0, int64_t *steps,    \
           int64_t *status, int64_t rows, int64_t n, int64_t n_in, int64_t out, int64_t max_steps, \
           int64_t substeps, int64_t window, const int64_t *obs, const T *lim,                   \
@@ -193,21 +210,8 @@ void NAME(const T *w, const T *wout, const T *rest, const uint64_t *keys, const 
             for (int64_t j = 0; j < n; ++j) slot[j] = cnt[j];                                  \
             int64_t in_window = t + 1 < window ? t + 1 : window;                               \
             T denom = (T)((double)in_window * (double)window_s);                               \
-            T drive;                                                                           \
-            if (WO) {                                                                          \
-                double acc = 0;                                                                \
-                for (int64_t j = 0; j < n; ++j) {                                              \
-                    if (WO[j] == 0) continue;                                                  \
-                    T sum = hist[j];                                                           \
-                    for (int64_t k = 1; k < window; ++k) sum += hist[k * n + j];               \
-                    acc += (double)((sum / denom - rest[j]) * WO[j]);                          \
-                }                                                                              \
-                drive = (T)acc;                                                                \
-            } else {                                                                           \
-                T sum = hist[out];                                                             \
-                for (int64_t k = 1; k < window; ++k) sum += hist[k * n + out];                 \
-                drive = sum / denom;                                                           \
-            }                                                                                  \
+            T drive = WO ? weighted_rate_##SUFFIX(hist, window, n, denom, WO, rest)            \
+                         : window_rate_##SUFFIX(hist, window, n, out, denom);                  \
             T force = drive > thr_hz ? (T)10.0 : (T)-10.0;                                     \
             PLANT(s, force, tau, g, total, mp, mpl, l);                                        \
             if (!(isfinite(s[0]) && isfinite(s[1]) && isfinite(s[2]) && isfinite(s[3]))) {     \
@@ -218,8 +222,8 @@ void NAME(const T *w, const T *wout, const T *rest, const uint64_t *keys, const 
         steps[r] = t;                                                                          \
     }                                                                                          \
 }
-DEFINE_MARKOV_LOOP(markov_loop_f32, izh_f32_substep, plant_f32, float)
-DEFINE_MARKOV_LOOP(markov_loop_f64, izh_f64_substep, plant_f64, double)
+DEFINE_MARKOV_LOOP(markov_loop_f32, izh_f32_substep, plant_f32, float, f32)
+DEFINE_MARKOV_LOOP(markov_loop_f64, izh_f64_substep, plant_f64, double, f64)
 """
 
 MAX_WINDOW = 16

@@ -348,16 +348,15 @@ def write_report(results: dict[str, ControllerRuns], table: str, out: str | os.P
         tr, tau = _record_episode(r, table, run)
         if table == "table1":
             label += f" (first {len(tr['x']) * tau:g} s)"
+        inputs = {0: "x", 1: "θ"} if r.config.num_inputs == 2 else {0: "x", 1: "ẋ", 2: "θ", 3: "θ̇"}
         if c == "snn":
-            node_names = {0: "x", 1: "θ"} if r.config.num_inputs == 2 else {0: "x", 1: "ẋ", 2: "θ", 3: "θ̇"}
-            node_names[r.config.first_output] = "out"
+            node_names = {**inputs, r.config.first_output: "out"}
             names = [f"{node_names.get(int(n), 'hidden')} ({int(n)})" for n in tr["nodes"]]
             fig = plot_episode(tr["activity"], tr["x"], tr["theta"], tr["force"], tau_s=tau, names=names, title=label)
         else:
             fig = plot_trajectory(tr["x"], tr["theta"], tr["force"], tau_s=tau, title=label)
         written.append(save_figure(fig, out / f"trajectory_{c}.png"))
-        names = {0: "x", 1: "θ"} if r.config.num_inputs == 2 else {0: "x", 1: "ẋ", 2: "θ", 3: "θ̇"}
-        names[r.config.first_output] = "F"
+        names = {**inputs, r.config.first_output: "F"}
         written.append(save_figure(plot_topology(r.champions, r.config, run, 0, labels=names,
                                                  title=f"Champion topology: {label}"), out / f"topology_{c}.png"))
         for i, seed in enumerate(r.seeds):

@@ -20,7 +20,7 @@ import torch
 from evolution.neat import NEAT
 from tasks.experiments.reproduce import _tasks, mann_whitney
 
-__all__ = ["sweep"]
+__all__ = ["sweep", "seed_range"]
 
 
 def sweep(table: str, param: str, values: list[float], seeds: list[int], *, generations: int = 100,
@@ -44,7 +44,8 @@ def sweep(table: str, param: str, values: list[float], seeds: list[int], *, gene
     return rows
 
 
-def _seeds(text: str) -> list[int]:
+def seed_range(text: str) -> list[int]:
+    """``"0-59"`` -> [0, ..., 59]; ``"7"`` -> [7]."""
     lo, _, hi = text.partition("-")
     return list(range(int(lo), int(hi or lo) + 1))
 
@@ -54,7 +55,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("table", choices=["table1", "table2"])
     ap.add_argument("--param", required=True, help="a NEATConfig field, e.g. weight_mutate_power")
     ap.add_argument("--values", required=True, help="comma-separated values")
-    ap.add_argument("--seeds", type=_seeds, default=_seeds("0-59"), help="e.g. 0-59 (default)")
+    ap.add_argument("--seeds", type=seed_range, default=seed_range("0-59"), help="e.g. 0-59 (default)")
     ap.add_argument("--generations", type=int, default=100)
     ap.add_argument("--controllers", default="snn,sigmoid")
     ap.add_argument("--threads", type=int, default=None)
