@@ -149,6 +149,26 @@ def run_seed(task: str, seed: int, generations: int, self_loops: bool, elitism: 
     return state["solved"]
 
 
+def compare(neat_python: list[int], runs_csv: list[str]) -> None:
+    """Our sigmoid NEAT's runs (from ``runs.csv`` files) against neat-python's, U-tested."""
+    import csv
+
+    from tasks.experiments.reproduce import mann_whitney
+
+    ours = []
+    for path in runs_csv:
+        with open(path, newline="") as f:
+            ours += [int(r["counted_generations"]) for r in csv.DictReader(f) if r["controller"] == "sigmoid"]
+    if not ours:
+        raise SystemExit(f"--compare: no sigmoid runs in {runs_csv}")
+    p = mann_whitney(ours, neat_python)["p_value"]
+    faster = "ours" if statistics.mean(ours) < statistics.mean(neat_python) else "neat-python"
+    print(f"snn-neat sigmoid NEAT ({len(ours)} runs): median {statistics.median(ours):g}, mean "
+          f"{statistics.mean(ours):.2f}; neat-python ({len(neat_python)} runs): median "
+          f"{statistics.median(neat_python):g}, mean {statistics.mean(neat_python):.2f}; Mann-Whitney U p = {p:.3g} "
+          f"(lower mean: {faster})")
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--task", choices=sorted(TASKS), default="markov")
@@ -157,6 +177,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--self-loops", action="store_true", help="keep neat-python's self-connections at the start")
     ap.add_argument("--elitism", type=int, default=2,
                     help="neat-python's per-species elitism (default 2, its own; 1 is closer to the paper's)")
+    ap.add_argument("--compare", nargs="*", default=[], metavar="RUNS_CSV",
+                    help="runs.csv files of `snn-neat reproduce`: print their sigmoid NEAT runs against "
+                         "neat-python's (medians, means, Mann-Whitney U)")
     args = ap.parse_args(argv)
     solved = []
     for seed in args.seeds:
@@ -167,6 +190,8 @@ def main(argv: list[str] | None = None) -> None:
               + f" ({time.perf_counter() - start:.0f} s)", flush=True)
     counted = [g if g > 0 else args.generations + 1 for g in solved]
     fails = sum(g < 0 for g in solved)
+    if args.compare:
+        compare(counted, args.compare)
     print(f"neat-python 2.0.0, {args.task}{' (self-loop start)' if args.self_loops else ''}, elitism {args.elitism}, seeds "
           f"{args.seeds[0]}-{args.seeds[-1]}: failures {fails}/{len(solved)}, median {statistics.median(counted):g}, "
           f"mean {statistics.mean(counted):.2f} generations (failures as {args.generations + 1})")

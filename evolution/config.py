@@ -71,6 +71,9 @@ class NEATConfig:
     # Gaussian stdev of a perturbation. [NEATC] perturbs by up to +-2.5; on XOR (50 seeds,
     # 100 generations) 2.5 failed 5 runs, 1.44 failed 9, neat-python's 0.5 failed 16.
     weight_mutate_power: float = field(default=2.5, metadata=_range(0, None))  # [NEATC]
+    # [NP] instead: every gene of every child decides alone, perturbed with
+    # ``weight_mutate_rate``, else replaced with ``weight_replace_rate``, else left unchanged.
+    weight_mutate_per_gene: bool = False
     conn_add_prob: float = field(default=0.1, metadata=_range(0, 1))  # [Qiu19], [NEAT02] small pops
     node_add_prob: float = field(default=0.03, metadata=_range(0, 1))  # [Qiu19], [NEAT02]
     # [NP] enabled_mutate_rate: per-gene chance to flip the enabled flag.
@@ -107,6 +110,8 @@ class NEATConfig:
     # --- reproduction ([Qiu19]: (150,150)-ES plus species elitism) ---------------------
     survival_threshold: float = field(default=0.2, metadata=_range(0, 1, lo_open=True))  # [Qiu19] best 20 %
     # [Qiu19]: the champion of each species with more than 5 members is copied unchanged.
+    # [NP] copies its ``elitism`` = 2 best of every species (``elitism_min_species_size`` 1).
+    elitism: int = field(default=1, metadata=_range(0, None, integer=True))
     elitism_min_species_size: int = field(default=6, metadata=_range(1, None, integer=True))
     # [NEAT02]: 25 % of offspring come from mutation alone, 75 % from crossover.
     crossover_prob: float = field(default=0.75, metadata=_range(0, 1))
@@ -199,7 +204,7 @@ IGNORED_INI_KEYS = {
     "response_min_value", "response_mutate_power", "response_mutate_rate", "response_replace_rate",
     "response_init_type", "conn_delete_prob", "node_delete_prob", "enabled_default",
     "enabled_rate_to_true_add", "enabled_rate_to_false_add", "single_structural_mutation",
-    "structural_mutation_surer", "weight_init_type", "species_fitness_func", "elitism",
+    "structural_mutation_surer", "weight_init_type", "species_fitness_func",
     "min_species_size", "compatibility_disjoint_coefficient_nodes", "seed",
 }
 

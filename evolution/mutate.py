@@ -30,16 +30,27 @@ def _bcast(mask: Tensor, like: Tensor) -> Tensor:
 
 def mutate_weights(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> Genomes:
     """[NEAT02]: with ``weight_mutate_rate`` a genome's weights mutate; then each gene is
-    replaced by a fresh draw (``weight_replace_rate``) or perturbed by N(0, power^2)."""
+    replaced by a fresh draw (``weight_replace_rate``) or perturbed by N(0, power^2).
+
+    ``cfg.weight_mutate_per_gene`` ([NP]): every gene of an active genome decides alone:
+    perturbed with ``weight_mutate_rate``, else replaced with ``weight_replace_rate``, else
+    unchanged. Both draw the same random numbers, so neither shifts the other streams.
+    """
     P, N = g.pop_size, g.num_nodes
     genome_hit = active & (rng.rand(P) < cfg.weight_mutate_rate)
     u = rng.rand(P, N, N)
     noise = rng.randn(P, N, N, dtype=g.weight.dtype)
-    replace = u < cfg.weight_replace_rate
+    if cfg.weight_mutate_per_gene:
+        perturb = u < cfg.weight_mutate_rate
+        replace = ~perturb & (u < cfg.weight_mutate_rate + cfg.weight_replace_rate)
+        gene_hit = _bcast(active, g.weight) & (perturb | replace)
+    else:
+        replace = u < cfg.weight_replace_rate
+        gene_hit = _bcast(genome_hit, g.weight)
     fresh = cfg.weight_init_mean + cfg.weight_init_stdev * noise
     perturbed = g.weight + cfg.weight_mutate_power * noise
     new = torch.where(replace, fresh, perturbed).clamp(cfg.weight_min_value, cfg.weight_max_value)
-    hit = _bcast(genome_hit, g.weight) & g.conn
+    hit = gene_hit & g.conn
     return Genomes(torch.where(hit, new, g.weight), g.conn, g.enabled, g.node, g.sigma)
 
 

@@ -4,7 +4,8 @@
 ([NEAT02], top ``species_elitism`` species protected), explicit fitness sharing (offspring
 in proportion to the species' mean fitness above the run's minimum, rounded by largest
 remainder so the population stays exactly P), the champion copied unchanged when the species
-has more than 5 members, the best 20 % as parents, crossover or cloning, then mutation.
+has more than 5 members (``elitism`` best members, ``elitism_min_species_size``), the best
+20 % as parents, crossover or cloning, then mutation.
 Parents are discarded.
 """
 
@@ -117,13 +118,15 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
     osp = torch.searchsorted(ends, k, right=True).clamp_max(S - 1)
     pos = k - (torch.gather(ends, 1, osp) - torch.gather(counts, 1, osp))
     o_start, o_size, o_par = (torch.gather(t, 1, osp) for t in (start, size, n_parents))
-    elite = (pos == 0) & (o_size >= cfg.elitism_min_species_size)
+    # The species' first ``elitism`` offspring are its best members, copied unchanged.
+    elite = (pos < cfg.elitism) & (pos < o_size) & (o_size >= cfg.elitism_min_species_size)
 
     def pick_in_species(u: Tensor) -> Tensor:
         rank = (u * o_par).long().clamp_max(o_par - 1).clamp_min(0)
         return torch.gather(order, 1, o_start + rank)
 
-    p1 = torch.where(elite, torch.gather(order, 1, o_start), pick_in_species(rng.rand(P, dtype=torch.float64)))
+    elite_index = torch.gather(order, 1, (o_start + pos.clamp_max(o_size - 1).clamp_min(0)).clamp_max(P - 1))
+    p1 = torch.where(elite, elite_index, pick_in_species(rng.rand(P, dtype=torch.float64)))
     p2 = pick_in_species(rng.rand(P, dtype=torch.float64))
     # Interspecies mating: the second parent from any species' parents.
     sorted_species = torch.gather(key_species, 1, order)

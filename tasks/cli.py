@@ -7,6 +7,10 @@ import sys
 import time
 from pathlib import Path
 
+# tasks.experiments.cartpole.GA_CHOICES, spelled out so that --help needs no torch (a test
+# keeps the two equal).
+GA_CHOICES = ("tuned", "neat-c++", "neat-python")
+
 
 def _positive_float(text: str) -> float:
     try:
@@ -69,18 +73,25 @@ def _cmd_evolve(args: argparse.Namespace) -> int:
     from evolution.genome_io import save_genome
     from evolution.neat import NEAT
     from evolution.reporters import StatisticsReporter, StdOutReporter, TqdmReporter
-    from tasks.experiments.cartpole import controller_config, markov_config, markov_fitness, nonmarkov_fitness
+    from tasks.experiments.cartpole import (
+        controller_config,
+        ga_choice,
+        markov_config,
+        markov_fitness,
+        nonmarkov_fitness,
+    )
 
     try:
         device = torch.device(args.device)
         torch.empty(0, device=device)
     except (RuntimeError, AssertionError) as exc:
         raise SystemExit(f"snn-neat evolve: error: --device {args.device!r} is not available ({exc})") from None
+    preset, extra = ga_choice("table1" if args.task == "markov" else "table2", args.controller, args.ga)
     if args.task == "markov":
-        config = markov_config(args.controller, self_loops=args.self_loops)
+        config = markov_config(args.controller, self_loops=args.self_loops, ga=preset, **extra)
         fitness = markov_fitness(args.controller, config)
     else:
-        config = controller_config(args.controller, self_loops=args.self_loops)
+        config = controller_config(args.controller, self_loops=args.self_loops, ga=preset, **extra)
         fitness = nonmarkov_fitness(args.controller, config)
     neat = NEAT(config, seeds=[args.seed], device=device)
     stats = neat.add_reporter(StatisticsReporter())
@@ -118,7 +129,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     command = "snn-neat " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["reproduce"] else (
         f"snn-neat reproduce {args.table} --runs {args.runs} --seed {args.seed} --out {args.out}")
     results = {}
-    common = dict(resume=args.resume, self_loops=args.self_loops, checkpoint_every=args.checkpoint_every,
+    common = dict(resume=args.resume, self_loops=args.self_loops, ga=args.ga, checkpoint_every=args.checkpoint_every,
                   device=args.device, progress=not args.quiet)
     try:
         if args.ray is not None:
@@ -178,6 +189,8 @@ def build_parser() -> argparse.ArgumentParser:
     evo.add_argument("--device", default="cpu", help="torch device (default: cpu)")
     evo.add_argument("--self-loops", action="store_true",
                      help="start with an output self-connection (neat-python's full start)")
+    evo.add_argument("--ga", choices=GA_CHOICES, default="tuned",
+                     help="GA settings (default: tuned, the controller's pick for the task; or neat-c++, neat-python)")
     evo.add_argument("--out", default="results/evolve", help="output folder (default: results/evolve)")
     evo.add_argument("--verbose", action="store_true", help="a line per generation instead of a progress bar")
     evo.add_argument("--report-every", type=_positive_int, default=1, help="with --verbose: every N generations")
@@ -198,6 +211,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="comma-separated subset of snn,sigmoid (default: both)")
     rep.add_argument("--self-loops", action="store_true",
                      help="start genomes with an output self-connection (sensitivity check; the paper has none)")
+    rep.add_argument("--ga", choices=GA_CHOICES, default="tuned",
+                     help="GA settings: 'tuned' (default), each controller's own pick for the table, made on tuning "
+                          "seeds; or one preset for both: neat-c++ (NEAT 2002 / NEAT C++) or neat-python (its defaults)")
     rep.add_argument("--out", default=None, help="output folder (default: results/TABLE)")
     rep.add_argument("--resume", action="store_true", help="continue from the checkpoints in --out")
     rep.add_argument("--checkpoint-every", type=_positive_int, default=1, help="generations between checkpoints")

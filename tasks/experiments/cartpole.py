@@ -29,7 +29,7 @@ from tasks.controllers import (
     markov_limits,
 )
 
-__all__ = ["CONTROLLERS", "NONMARKOV", "MARKOV", "controller_config", "nonmarkov_start", "nonmarkov_fitness",
+__all__ = ["CONTROLLERS", "GA_PRESETS", "GA_CHOICES", "TUNED_GA", "ga_overrides", "ga_choice", "describe_ga", "NONMARKOV", "MARKOV", "controller_config", "nonmarkov_start", "nonmarkov_fitness",
            "markov_config", "markov_fitness"]
 
 CONTROLLERS = ("snn", "sigmoid")
@@ -40,8 +40,58 @@ NONMARKOV = {"tau_s": 0.01, "theta0_rad": math.radians(3.0), "max_steps": 5000}
 MARKOV = {"tau_s": 0.02, "theta0_rad": math.radians(3.0), "max_steps": 100_000}
 
 
-def controller_config(controller: str, *, self_loops: bool = False, **overrides) -> NEATConfig:
-    """The NEAT config of a controller for the non-Markov task."""
+# GA settings, as named presets over NEATConfig. "neat-c++": NEATConfig's defaults ([NEAT02],
+# [Qiu19], and NEAT C++'s weight mutation). "neat-python": neat-python 2.0.0's defaults wherever
+# they differ and this NEAT has the knob (per-gene weight mutation of power 0.5 within +-30, its
+# 2 best genomes of every species kept, crossover for every child, no interspecies mating,
+# stagnation after 20 generations, distance weight term 0.5 and genes counted by the larger
+# genome at any size). neat-python's node bias genes are this NEAT's bias-input connections.
+GA_PRESETS: dict[str, dict] = {
+    "neat-c++": {},
+    "neat-python": dict(weight_mutate_power=0.5, weight_mutate_per_gene=True, weight_max_value=30.0,
+                        weight_min_value=-30.0, elitism=2, elitism_min_species_size=1, crossover_prob=1.0,
+                        interspecies_crossover_prob=0.0, max_stagnation=20, compatibility_weight_coefficient=0.5,
+                        compatibility_normalize_min_genes=1),
+}
+
+
+# Each controller's GA settings per table, as used by ``snn-neat reproduce`` (``--ga tuned``):
+# picked by ``python -m tasks.experiments.tune_ga`` on tuning seeds 5000-5059 (5000-5031 for
+# NEAT-SNN on Table I), never on a reported seed set, from the same grid for every controller:
+# both presets x survival threshold 0.1 or 0.2 ([Qiu19]'s). The numbers behind each pick are in
+# the README ("GA settings, chosen per controller").
+TUNED_GA: dict[tuple[str, str], tuple[str, dict]] = {
+    ("table1", "sigmoid"): ("neat-python", {"survival_threshold": 0.1}),
+    ("table1", "snn"): ("neat-c++", {}),
+    ("table2", "sigmoid"): ("neat-python", {"survival_threshold": 0.1}),
+    ("table2", "snn"): ("neat-c++", {"survival_threshold": 0.1}),
+}
+GA_CHOICES = ("tuned", *GA_PRESETS)
+
+
+def ga_choice(table: str, controller: str, ga: str = "tuned") -> tuple[str, dict]:
+    """``(preset, extra overrides)`` for ``ga``: a preset name as it is, or ``"tuned"``: the
+    controller's pick for the table (``TUNED_GA``)."""
+    if ga == "tuned":
+        return TUNED_GA[(table, controller)]
+    ga_overrides(ga)  # validates the name
+    return ga, {}
+
+
+def describe_ga(preset: str, extra: dict) -> str:
+    """``"neat-python, survival_threshold=0.1"``: a GA choice in words, for tables and checkpoints."""
+    return ", ".join([preset, *(f"{k}={v:g}" for k, v in sorted(extra.items()))])
+
+
+def ga_overrides(ga: str) -> dict:
+    """The ``NEATConfig`` fields a GA preset sets (``GA_PRESETS``)."""
+    if ga not in GA_PRESETS:
+        raise ValueError(f"ga must be one of {tuple(GA_PRESETS)}, got {ga!r}")
+    return dict(GA_PRESETS[ga])
+
+
+def controller_config(controller: str, *, self_loops: bool = False, ga: str = "neat-c++", **overrides) -> NEATConfig:
+    """The NEAT config of a controller for the non-Markov task, under GA preset ``ga``."""
     if controller == "snn":
         base = dict(num_inputs=2, num_outputs=1, num_bias=0, max_hidden=16,
                     # sigma scales sum_i w_i r_i (Hz): 0.005 keeps F off saturation at ~100 Hz.
@@ -53,6 +103,7 @@ def controller_config(controller: str, *, self_loops: bool = False, **overrides)
     else:
         raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
     base.update(initial_self_loops=self_loops, fitness_threshold=float(NONMARKOV["max_steps"]))
+    base.update(ga_overrides(ga))
     base.update(overrides)
     return NEATConfig(**base)
 
@@ -86,7 +137,7 @@ def nonmarkov_fitness(controller: str, config: NEATConfig, *, spiking: SpikingSp
     return fitness
 
 
-def markov_config(controller: str, *, self_loops: bool = False, **overrides) -> NEATConfig:
+def markov_config(controller: str, *, self_loops: bool = False, ga: str = "neat-c++", **overrides) -> NEATConfig:
     """The NEAT config of a controller for the Markov task (four inputs, bang-bang output).
 
     The start genome is the paper's: the four inputs wired to the output (plus the bias input
@@ -97,7 +148,7 @@ def markov_config(controller: str, *, self_loops: bool = False, **overrides) -> 
     if controller == "snn":
         base.update(num_bias=0)
     base.update(overrides)
-    cfg = controller_config(controller, self_loops=self_loops, **base)
+    cfg = controller_config(controller, self_loops=self_loops, ga=ga, **base)
     return NEATConfig(**{**cfg.to_dict(), "fitness_threshold": float(MARKOV["max_steps"])})
 
 

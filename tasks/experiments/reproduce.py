@@ -98,7 +98,7 @@ class ControllerRuns:
         return {"controller": self.controller, "best": min(counted), "worst": max(counted),
                 "median": statistics.median(counted), "mean": statistics.mean(counted),
                 "failures": failures, "runs": len(counted), "failure_rate": f"{failures}/{len(counted)}",
-                "wall_s": self.wall_s}
+                "wall_s": self.wall_s, "ga": self.extra.get("ga", "")}
 
 
 def _progress(total: int, initial: int, desc: str, enabled: bool):
@@ -108,27 +108,35 @@ def _progress(total: int, initial: int, desc: str, enabled: bool):
 
 
 def run_controller(task_name: str, controller: str, seeds: list[int], generations: int, out: str | os.PathLike,
-                   *, resume: bool = False, self_loops: bool = False, checkpoint_every: int = 1,
+                   *, resume: bool = False, self_loops: bool = False, ga: str = "tuned", checkpoint_every: int = 1,
                    device: str | torch.device = "cpu", progress: bool = True,
                    stop_after: int | None = None) -> ControllerRuns:
     """Evolve ``controller`` on ``task_name`` for each seed (one batch), checkpointing to ``out``.
 
     ``resume`` continues from ``OUT/<controller>.ckpt`` (which must have been written with
     the same task, seeds, budget and start genome); without it an existing checkpoint is an
-    error, so a finished reproduction is never overwritten by accident. ``stop_after``
+    error, so a finished reproduction is never overwritten by accident. ``ga``: a GA preset of
+    ``tasks.experiments.cartpole.GA_PRESETS``, or ``"tuned"`` (default), the controller's own
+    pick for the table (``TUNED_GA``). ``stop_after``
     (generations in this call) exists for tests of interruption.
     """
+    from tasks.experiments.cartpole import GA_CHOICES, describe_ga, ga_choice
+
     tasks = _tasks()
     if task_name not in tasks:
         raise ReproduceError(f"table must be one of {TASKS}, got {task_name!r}")
     task = tasks[task_name]
+    if ga not in GA_CHOICES:
+        raise ReproduceError(f"ga must be one of {GA_CHOICES}, got {ga!r}")
+    preset, ga_extra = ga_choice(task_name, controller, ga)
+    ga_text = describe_ga(preset, ga_extra)
     if checkpoint_every < 1:
         raise ReproduceError(f"checkpoint_every must be >= 1, got {checkpoint_every}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"{controller}.ckpt"
     identity = {"task": task_name, "controller": controller, "seeds": list(seeds), "generations": generations,
-                "self_loops": self_loops}
+                "self_loops": self_loops, "ga": ga_text}
     if path.exists():
         if not resume:
             raise ReproduceError(f"{path} exists: pass --resume to continue it, or choose another --out")
@@ -143,7 +151,7 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
         wall = float(data["wall_s"])
         config = neat.config
     else:
-        config = task.config(controller, self_loops=self_loops)
+        config = task.config(controller, self_loops=self_loops, ga=preset, **ga_extra)
         neat = NEAT(config, seeds=seeds, device=device)
         history, wall = [], 0.0
 
@@ -185,7 +193,8 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
                           solved_generation=neat.solved_generation.cpu().tolist(),
                           best_fitness=neat.best_fitness.cpu().tolist(), history=hist,
                           champions=neat.best_genomes.to("cpu"), config=config, wall_s=wall,
-                          extra={"complete": neat.generation >= generations or not bool(neat.active_runs.any())})
+                          extra={"complete": neat.generation >= generations or not bool(neat.active_runs.any()),
+                                 "ga": ga_text})
 
 
 def mann_whitney(a: list[int], b: list[int]) -> dict:
@@ -221,6 +230,9 @@ def format_markdown(summary: dict, seeds: list[int], command: str) -> str:
             lines.append(f"| {LABELS.get(c, c)} | paper | {paper['best']} | {paper['worst']} | {paper['median']:g} | "
                          f"{paper['mean']:.2f} | {paper['failures']}/{paper['runs']} | |")
     lines += ["", "Median and mean count a failed run (no solution within the budget) as budget + 1 generations."]
+    ga = [f"{LABELS.get(c, c)}: {row['ga']}" for c, row in summary["rows"].items() if row.get("ga")]
+    if ga:
+        lines.append("GA settings (tasks/experiments/cartpole.py, GA_PRESETS and TUNED_GA): " + "; ".join(ga) + ".")
     if "mann_whitney_u" in summary:
         mw = summary["mann_whitney_u"]
         p = mw["p_value"]

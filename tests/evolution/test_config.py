@@ -55,7 +55,7 @@ def test_reads_a_neat_python_ini(tmp_path):
     cfg = NEATConfig.from_ini(path)
     assert cfg.fitness_threshold == 3.9 and cfg.feed_forward is True and cfg.reset_on_extinction is False
     assert cfg.conn_add_prob == 0.5 and cfg.node_add_prob == 0.2 and cfg.max_stagnation == 20
-    assert cfg.compatibility_weight_coefficient == 0.5 and cfg.weight_max_value == 30
+    assert cfg.compatibility_weight_coefficient == 0.5 and cfg.weight_max_value == 30 and cfg.elitism == 2
     assert NEATConfig.from_ini(path, pop_size=50).pop_size == 50
 
 

@@ -197,3 +197,59 @@ def test_allocation_sums_to_pop_size_and_follows_mean_fitness():
     assert counts.tolist() == [[0, 8, 2]] and counts.sum() == 10
     flat = allocate_offspring(torch.ones(1, 10, dtype=torch.float64), species, survivors, 10)
     assert flat.sum() == 10 and flat.tolist() in ([[4, 3, 3]], [[3, 4, 3]], [[3, 3, 4]])
+
+
+def test_per_gene_weight_mutation_follows_neat_python():
+    """[NP]: every gene of an active genome is perturbed (rate), else replaced (replace
+    rate), else kept; inactive genomes and absent genes never change."""
+    cfg = small_config(pop_size=2000, weight_mutate_per_gene=True, weight_mutate_rate=0.6,
+                       weight_replace_rate=0.3, weight_mutate_power=0.01, weight_init_stdev=5.0,
+                       weight_max_value=1e6, weight_min_value=-1e6)
+    g, rng = population(cfg, seeds=(21,))
+    active = torch.ones(1, 2000, dtype=torch.bool)
+    active[0, :500] = False
+    after = mutate_weights(g, cfg, rng, active)
+    assert torch.equal(after.weight[0, :500], g.weight[0, :500])
+    assert torch.equal(after.weight[~g.conn], g.weight[~g.conn])
+    genes = g.conn[0, 500:]
+    delta = (after.weight[0, 500:] - g.weight[0, 500:]).abs()[genes]
+    kept = (delta == 0).double().mean().item()
+    small = ((delta > 0) & (delta < 0.05)).double().mean().item()  # perturbed by N(0, 0.01^2)
+    large = (delta >= 0.05).double().mean().item()  # a fresh N(0, 5^2) draw
+    assert kept == pytest.approx(0.1, abs=0.02)
+    assert small == pytest.approx(0.6, abs=0.03)
+    assert large == pytest.approx(0.3, abs=0.03)
+    # Genome-level mutation (NEAT02) leaves a genome either untouched or changed everywhere.
+    whole = mutate_weights(g, small_config(pop_size=2000, weight_mutate_rate=0.5), rng, active)
+    changed = ((whole.weight != g.weight) & g.conn).flatten(2).any(-1)[0, 500:]
+    all_changed = (((whole.weight != g.weight) | ~g.conn).flatten(2).all(-1))[0, 500:]
+    assert torch.equal(changed, all_changed) and 0.4 < changed.double().mean().item() < 0.6
+
+
+@pytest.mark.parametrize("elitism, min_size", [(1, 6), (2, 1), (3, 1)])
+def test_elitism_copies_each_species_best_members_unchanged(elitism, min_size):
+    cfg = small_config(pop_size=60, elitism=elitism, elitism_min_species_size=min_size, node_add_prob=0.5,
+                       conn_add_prob=0.5)
+    g, rng = population(cfg, seeds=(5, 6))
+    everyone = torch.ones(2, 60, dtype=torch.bool)
+    for _ in range(3):  # diverse genomes, so that a copy is recognisable
+        g, _ = mutate_add_node(g, cfg, rng, everyone)
+        g = mutate_weights(mutate_add_connection(g, cfg, rng, everyone), cfg, rng, everyone)
+    species, sp = speciate(g, empty_species(2, cfg.num_nodes, 4, device=g.device, dtype=g.weight.dtype), cfg, rng, 0)
+    fitness = torch.rand(2, 60, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
+    children, elite, _, info = reproduce(g, fitness, species, sp, cfg, rng, 1)
+    for r in range(2):
+        expected = 0
+        for s in torch.unique(species[r]).tolist():
+            members = torch.nonzero(species[r] == s).flatten()
+            if info.offspring[r, s] == 0 or len(members) < min_size:
+                continue
+            best = members[torch.argsort(fitness[r, members], descending=True)][:min(elitism, len(members))]
+            n = min(len(best), int(info.offspring[r, s]))
+            expected += n
+            for p in best[:n].tolist():  # each elite is an exact copy of its parent, flagged elite
+                copies = [c for c in torch.nonzero(elite[r]).flatten().tolist()
+                          if torch.equal(children.weight[r, c], g.weight[r, p])
+                          and torch.equal(children.conn[r, c], g.conn[r, p])]
+                assert copies, f"run {r}: member {p} of species {s} was not copied"
+        assert int(elite[r].sum()) == expected

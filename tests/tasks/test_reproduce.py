@@ -135,3 +135,43 @@ def test_sensitivity_sweep_rows_and_cli(capsys):
                       "--generations", "2", "--controllers", "sigmoid"])
     out = capsys.readouterr().out
     assert "weight_mutate_power in [1.0]" in out and "sigmoid" in out
+
+
+def test_ga_choice_reaches_the_config_and_guards_resume(tmp_path):
+    from tasks.experiments.cartpole import GA_CHOICES, TUNED_GA, ga_choice
+    from tasks.experiments.sensitivity import parse_value
+
+    python_like = run_controller("table1", "sigmoid", [0, 1], 1, tmp_path / "np", ga="neat-python", progress=False)
+    cfg = python_like.config
+    assert cfg.weight_mutate_per_gene and cfg.elitism == 2 and cfg.weight_mutate_power == 0.5
+    assert python_like.row()["ga"] == "neat-python"
+    tuned = run_controller("table1", "sigmoid", [0, 1], 1, tmp_path / "tuned", progress=False)
+    preset, extra = TUNED_GA[("table1", "sigmoid")]
+    for key, value in extra.items():
+        assert getattr(tuned.config, key) == value
+    assert tuned.row()["ga"].startswith(preset)
+    assert ga_choice("table2", "snn", "neat-c++") == ("neat-c++", {})
+    with pytest.raises(ReproduceError, match="cannot resume .* ga="):
+        run_controller("table1", "sigmoid", [0, 1], 1, tmp_path / "np", resume=True, ga="neat-c++", progress=False)
+    with pytest.raises(ReproduceError, match="ga must be one of"):
+        run_controller("table1", "sigmoid", [0], 1, tmp_path / "bad", ga="neat-java", progress=False)
+    from tasks.cli import GA_CHOICES as CLI_GA_CHOICES
+
+    assert CLI_GA_CHOICES == GA_CHOICES
+    assert parse_value("2", "elitism") == 2 and parse_value("1", "weight_mutate_power") == 1.0
+    assert parse_value("true", "weight_mutate_per_gene") is True
+    with pytest.raises(ValueError, match="NEATConfig.elitism"):
+        parse_value("2.5", "elitism")
+
+
+def test_tune_ga_tries_every_preset_and_threshold_and_picks_the_lowest_mean(capsys):
+    from tasks.experiments.tune_ga import main as tune_main
+    from tasks.experiments.tune_ga import tune
+
+    seen = []
+    rows, best = tune("table2", "sigmoid", [0, 1], survival=[0.1, 0.2], generations=2, report=seen.append)
+    assert [(r["ga"], r["value"]) for r in rows] == [("neat-c++", 0.1), ("neat-c++", 0.2), ("neat-python", 0.1),
+                                                       ("neat-python", 0.2)]
+    assert seen == rows and best["mean"] == min(r["mean"] for r in rows)
+    tune_main(["table2", "--controllers", "sigmoid", "--seeds", "0-1", "--generations", "2", "--survival", "0.2"])
+    assert "picked:" in capsys.readouterr().out
