@@ -111,15 +111,6 @@ void NAME(const T *w, const T *wout, const T *sigma, const T *state0, int64_t *s
 DEFINE_SNN_LOOP(snn_loop_f32, izh_f32_row, plant_f32, float, sinf, cosf, expf, f32)
 DEFINE_SNN_LOOP(snn_loop_f64, izh_f64_row, plant_f64, double, sin, cos, exp, f64)
 
-/* out[j] = sum_i y[i] W[i * NN + j], each sum over i ascending. */
-#define SIG_MATVEC(T, y, W, out, NN) do {                                                      \
-    for (int64_t j = 0; j < (NN); ++j) (out)[j] = 0;                                           \
-    for (int64_t i = 0; i < (NN); ++i) {                                                       \
-        T yi_ = (y)[i];                                                                        \
-        for (int64_t j = 0; j < (NN); ++j) (out)[j] += yi_ * (W)[i * (NN) + j];                \
-    }                                                                                          \
-} while (0)
-
 #define DEFINE_SIG_LOOP(NAME, PLANT, T, EXP)                                                   \
 /* inputs: state variables obs[k] scaled by lim[k] to [0, 1]; bang: F = +-10 N on y > 0.5 */   \
 void NAME(const T *w, const T *state0, int64_t *steps, int64_t *status, int64_t rows,          \
@@ -138,13 +129,11 @@ void NAME(const T *w, const T *state0, int64_t *steps, int64_t *status, int64_t 
             for (int64_t k = 0; k < updates; ++k) {                                            \
                 for (int64_t j = 0; j < n_in; ++j) y[j] = in[j];                               \
                 for (int64_t j = n_in; j < first_out; ++j) y[j] = 1;                           \
-                /* acc[j] sums y[i] W[i, j] over i ascending, as the reference does; a  */  \
-                /* constant n for the usual sizes vectorises over j without reordering. */  \
-                switch (n) {                                                                   \
-                    SIZE_CASES(SIG_MATVEC(T, y, W, yn, N_))                                    \
-                    default: SIG_MATVEC(T, y, W, yn, n);                                       \
+                for (int64_t j = 0; j < n; ++j) {                                              \
+                    T acc = 0;                                                                 \
+                    for (int64_t i = 0; i < n; ++i) acc += y[i] * W[i * n + j];                \
+                    yn[j] = (T)1 / ((T)1 + EXP(-(slope * acc)));                               \
                 }                                                                              \
-                for (int64_t j = 0; j < n; ++j) yn[j] = (T)1 / ((T)1 + EXP(-(slope * yn[j])));  \
                 for (int64_t j = 0; j < n; ++j) y[j] = yn[j];                                  \
                 for (int64_t j = 0; j < n_in; ++j) y[j] = in[j];                               \
                 for (int64_t j = n_in; j < first_out; ++j) y[j] = 1;                           \

@@ -68,21 +68,21 @@ static inline void NAME##_substep(T *vv, T *uu, T *zz, const T *W, const T *I, T
         for (int64_t j = first; j < n; ++j) { vv[j] = v1[j]; uu[j] = u1[j]; zz[j] = 0; }       \
         return;                                                                                \
     }                                                                                          \
+    /* Branch-free, so a constant n vectorises: every neuron's reset is computed and kept    \
+       only where it spiked (v1 >= vpeak, or NaN, as the reference counts it). The kept     \
+       values come from the same operations as the reference's, so they are the same. */   \
     for (int64_t j = first; j < n; ++j) {                                                      \
-        T x = v1[j] - vpeak;                                                                   \
-        if (isnan(x)) x = 0;                                                                   \
-        if (x >= 0) {                                                                          \
-            T th = (vpeak - vv[j]) / (v1[j] - vv[j]);                                          \
-            if (isnan(th)) th = 0;                                                             \
-            th = th < 0 ? 0 : (th > 1 ? 1 : th);                                               \
-            T ur = uu[j] + th * (u1[j] - uu[j]) + d;                                           \
-            T vr = (T)0 + c;                                                                   \
-            NAME##_heun(vr, ur, it[j], a, b, ((T)1.0 - th) * dt, &vv[j], &uu[j]);              \
-            zz[j] = 1;                                                                         \
-            cnt[j] += 1;                                                                       \
-        } else {                                                                               \
-            vv[j] = v1[j]; uu[j] = u1[j]; zz[j] = 0;                                           \
-        }                                                                                      \
+        int spiked = !(v1[j] - vpeak < 0);                                                     \
+        T th = (vpeak - vv[j]) / (v1[j] - vv[j]);                                              \
+        th = isnan(th) ? (T)0 : th;                                                            \
+        th = th < 0 ? (T)0 : (th > 1 ? (T)1 : th);                                             \
+        T ur = uu[j] + th * (u1[j] - uu[j]) + d;                                               \
+        T vr = (T)0 + c, vs, us;                                                               \
+        NAME##_heun(vr, ur, it[j], a, b, ((T)1.0 - th) * dt, &vs, &us);                        \
+        vv[j] = spiked ? vs : v1[j];                                                           \
+        uu[j] = spiked ? us : u1[j];                                                           \
+        zz[j] = spiked ? (T)1 : (T)0;                                                          \
+        cnt[j] += spiked ? (T)1 : (T)0;                                                        \
     }                                                                                          \
 }                                                                                              \
 static inline void NAME##_row(T *vv, T *uu, T *zz, const T *W, const T *I, T *cnt, int64_t n, \
