@@ -37,7 +37,7 @@ def mutate_weights(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> 
     unchanged. Both draw the same random numbers, so neither shifts the other streams.
     """
     P, N = g.pop_size, g.num_nodes
-    genome_hit = active & (rng.rand(P) < cfg.weight_mutate_rate)
+    genome_u = rng.rand(P)  # drawn in both modes, so the streams stay aligned
     u = rng.rand(P, N, N)
     noise = rng.randn(P, N, N, dtype=g.weight.dtype)
     if cfg.weight_mutate_per_gene:
@@ -46,7 +46,7 @@ def mutate_weights(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> 
         gene_hit = _bcast(active, g.weight) & (perturb | replace)
     else:
         replace = u < cfg.weight_replace_rate
-        gene_hit = _bcast(genome_hit, g.weight)
+        gene_hit = _bcast(active & (genome_u < cfg.weight_mutate_rate), g.weight)
     fresh = cfg.weight_init_mean + cfg.weight_init_stdev * noise
     perturbed = g.weight + cfg.weight_mutate_power * noise
     new = torch.where(replace, fresh, perturbed).clamp(cfg.weight_min_value, cfg.weight_max_value)

@@ -125,7 +125,7 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
         rank = (u * o_par).long().clamp_max(o_par - 1).clamp_min(0)
         return torch.gather(order, 1, o_start + rank)
 
-    elite_index = torch.gather(order, 1, (o_start + pos.clamp_max(o_size - 1).clamp_min(0)).clamp_max(P - 1))
+    elite_index = torch.gather(order, 1, torch.where(elite, o_start + pos, 0))
     p1 = torch.where(elite, elite_index, pick_in_species(rng.rand(P, dtype=torch.float64)))
     p2 = pick_in_species(rng.rand(P, dtype=torch.float64))
     # Interspecies mating: the second parent from any species' parents.

@@ -120,15 +120,16 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
     pick for the table (``TUNED_GA``). ``stop_after``
     (generations in this call) exists for tests of interruption.
     """
-    from tasks.experiments.cartpole import GA_CHOICES, describe_ga, ga_choice
+    from tasks.experiments.cartpole import describe_ga, ga_choice
 
     tasks = _tasks()
     if task_name not in tasks:
         raise ReproduceError(f"table must be one of {TASKS}, got {task_name!r}")
     task = tasks[task_name]
-    if ga not in GA_CHOICES:
-        raise ReproduceError(f"ga must be one of {GA_CHOICES}, got {ga!r}")
-    preset, ga_extra = ga_choice(task_name, controller, ga)
+    try:
+        preset, ga_extra = ga_choice(task_name, controller, ga)
+    except ValueError as exc:
+        raise ReproduceError(str(exc)) from None
     ga_text = describe_ga(preset, ga_extra)
     if checkpoint_every < 1:
         raise ReproduceError(f"checkpoint_every must be >= 1, got {checkpoint_every}")

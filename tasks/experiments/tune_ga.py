@@ -9,7 +9,8 @@ table's task and prints generations to solve (failures as ``--generations`` + 1)
 the lowest mean, ties broken by the lower median, then by the order of the grid. Tuning
 seeds (5000 and up) are never among the reported seed sets (0-59, 60-119), so a setting is
 never chosen on the runs it is judged by. The picks used by ``snn-neat reproduce`` are
-recorded, with the numbers that chose them, in ``TUNED_GA`` (``tasks/experiments/cartpole.py``).
+recorded in ``TUNED_GA`` (``tasks/experiments/cartpole.py``), the numbers that chose them in
+the README.
 """
 
 from __future__ import annotations
