@@ -68,89 +68,180 @@ static inline T weighted_rate_##SUFFIX(const T *hist, int64_t window, int64_t n,
 DEFINE_DECODE(f32, float)
 DEFINE_DECODE(f64, double)
 
+/* Lanes: each thread runs LANES episodes in lockstep, one network per lane, so the substep
+   works on LANES independent networks at once and the core overlaps what one network's
+   serial chain (matvec, Heun, reset, next matvec) would leave idle. A lane whose episode
+   ends takes the next row at once. Every lane's arithmetic is its network's alone, in the
+   reference's order, so a row's result does not depend on its lane or its neighbours. */
+#define LANES 8
+static inline int64_t next_row(int64_t *next, int64_t rows) {
+    int64_t r;
+    _Pragma("omp atomic capture")
+    r = (*next)++;
+    return r < rows ? r : -1;
+}
+
 /* status[r]: 0 ok, 1 the plant produced NaN or inf. */
-#define DEFINE_SNN_LOOP(NAME, ROW, PLANT, T, SIN, COS, EXP, SUFFIX)                                    \
+#define DEFINE_SNN_LOOP(NAME, LSUB, PLANT, T, EXP, SUFFIX)                                     \
 void NAME(const T *w, const T *wout, const T *sigma, const T *state0, int64_t *steps,         \
           int64_t *status, int64_t rows, int64_t n, int64_t max_steps, int64_t substeps,      \
           int64_t window, T dt, T a, T b, T c, T d, T vpeak, T ibg, T imax, T window_s,        \
-          T tau, T g, T total, T mp, T mpl, T l, T xlim, T thlim, int threads) {                         \
-    _Pragma("omp parallel for schedule(dynamic, 4) num_threads(threads)")                      \
-    for (int64_t r = 0; r < rows; ++r) {                                                       \
-        T vv[MAXN], uu[MAXN], zz[MAXN], I[MAXN], cnt[MAXN], hist[16 * MAXN];                  \
-        const T *W = w + r * n * n, *WO = wout + r * n;                                        \
-        T s[4] = {state0[4 * r], state0[4 * r + 1], state0[4 * r + 2], state0[4 * r + 3]};      \
-        for (int64_t j = 0; j < n; ++j) { vv[j] = (T)-65.0; uu[j] = b * vv[j]; zz[j] = 0; }   \
-        for (int64_t k = 0; k < window * n; ++k) hist[k] = 0;                                  \
-        int64_t t = 0; status[r] = 0;                                                          \
-        for (; t < max_steps; ++t) {                                                           \
-            T xn = NORM(T, s[0], xlim), thn = NORM(T, s[2], thlim);                            \
-            for (int64_t j = 0; j < n; ++j) I[j] = ibg;                                        \
-            I[0] = ibg + imax * xn; I[1] = ibg + imax * thn;                                   \
-            for (int64_t j = 0; j < n; ++j) cnt[j] = 0;                                        \
-            /* a constant n for the usual sizes lets the compiler unroll and vectorise */   \
-            switch (n) {                                                                   \
-                SIZE_CASES(ROW(vv, uu, zz, W, I, cnt, N_, substeps, dt, a, b, c, d, vpeak))   \
-                default: ROW(vv, uu, zz, W, I, cnt, n, substeps, dt, a, b, c, d, vpeak);      \
-            }                                                                              \
-            T *slot = hist + (t % window) * n;                                                 \
-            for (int64_t j = 0; j < n; ++j) slot[j] = cnt[j];                                  \
-            int64_t in_window = t + 1 < window ? t + 1 : window;                               \
-            T denom = (T)((double)in_window * (double)window_s);                               \
-            T drive = weighted_rate_##SUFFIX(hist, window, n, denom, WO, 0);                   \
-            T fn = (T)1 / ((T)1 + EXP(-(sigma[r] * drive)));                                   \
-            T force = (T)10.0 * ((T)2.0 * fn - (T)1.0);                                        \
-            PLANT(s, force, tau, g, total, mp, mpl, l);                                                \
-            if (!(isfinite(s[0]) && isfinite(s[1]) && isfinite(s[2]) && isfinite(s[3]))) {     \
-                status[r] = 1; break;                                                          \
-            }                                                                                  \
-            if (fabs((double)s[0]) > (double)xlim || fabs((double)s[2]) > (double)thlim) break; \
+          T tau, T g, T total, T mp, T mpl, T l, T xlim, T thlim, int threads) {               \
+    int64_t next = 0;                                                                          \
+    _Pragma("omp parallel num_threads(threads)")                                               \
+    {                                                                                          \
+        T vv[LANES * MAXN], uu[LANES * MAXN], zz[LANES * MAXN], I[LANES * MAXN];              \
+        T cnt[LANES * MAXN], hist[LANES * 16 * MAXN], s[LANES][4];                             \
+        const T *W[LANES];                                                                     \
+        int64_t row[LANES], t[LANES];                                                          \
+        int live = 0;                                                                          \
+        for (int k = 0; k < LANES; ++k) {                                                      \
+            W[k] = w; row[k] = -1; s[k][0] = s[k][1] = s[k][2] = s[k][3] = 0;                  \
+            for (int64_t j = 0; j < n; ++j) { vv[k * n + j] = (T)-65.0; uu[k * n + j] = b * vv[k * n + j]; zz[k * n + j] = 0; } \
         }                                                                                      \
-        steps[r] = t;                                                                          \
+        for (;;) {                                                                             \
+            /* fill free lanes; rows with no steps to run finish here */                     \
+            for (int k = 0; k < LANES; ++k) {                                                  \
+                while (row[k] < 0) {                                                           \
+                    int64_t r = next_row(&next, rows);                                         \
+                    if (r < 0) break;                                                          \
+                    status[r] = 0;                                                             \
+                    if (max_steps <= 0) { steps[r] = 0; continue; }                            \
+                    row[k] = r; t[k] = 0; W[k] = w + r * n * n; ++live;                        \
+                    for (int q = 0; q < 4; ++q) s[k][q] = state0[4 * r + q];                   \
+                    for (int64_t j = 0; j < n; ++j) { vv[k * n + j] = (T)-65.0; uu[k * n + j] = b * vv[k * n + j]; zz[k * n + j] = 0; } \
+                    for (int64_t q = 0; q < window * n; ++q) hist[k * 16 * n + q] = 0;        \
+                }                                                                              \
+            }                                                                                  \
+            if (live == 0) break;                                                              \
+            for (int k = 0; k < LANES; ++k) {                                                  \
+                T xn = NORM(T, s[k][0], xlim), thn = NORM(T, s[k][2], thlim);                  \
+                T *Ik = I + k * n;                                                             \
+                for (int64_t j = 0; j < n; ++j) { Ik[j] = ibg; cnt[k * n + j] = 0; }          \
+                Ik[0] = ibg + imax * xn; Ik[1] = ibg + imax * thn;                             \
+            }                                                                                  \
+            /* a constant n for the usual sizes lets the compiler unroll and vectorise */    \
+            for (int64_t q = 0; q < substeps; ++q) {                                           \
+                switch (n) {                                                                   \
+                    SIZE_CASES(LSUB(vv, uu, zz, W, I, cnt, LANES, N_, dt, a, b, c, d, vpeak))         \
+                    default: LSUB(vv, uu, zz, W, I, cnt, LANES, n, dt, a, b, c, d, vpeak);          \
+                }                                                                              \
+            }                                                                                  \
+            for (int k = 0; k < LANES; ++k) {                                                  \
+                int64_t r = row[k];                                                            \
+                if (r < 0) continue; /* an idle lane: its numbers are never read */           \
+                T *hk = hist + k * 16 * n, *slot = hk + (t[k] % window) * n;                   \
+                for (int64_t j = 0; j < n; ++j) slot[j] = cnt[k * n + j];                      \
+                int64_t in_window = t[k] + 1 < window ? t[k] + 1 : window;                     \
+                T denom = (T)((double)in_window * (double)window_s);                           \
+                T drive = weighted_rate_##SUFFIX(hk, window, n, denom, wout + r * n, 0);       \
+                T fn = (T)1 / ((T)1 + EXP(-(sigma[r] * drive)));                               \
+                T force = (T)10.0 * ((T)2.0 * fn - (T)1.0);                                    \
+                T *sk = s[k];                                                                  \
+                PLANT(sk, force, tau, g, total, mp, mpl, l);                                   \
+                int end = 0;                                                                   \
+                if (!(isfinite(sk[0]) && isfinite(sk[1]) && isfinite(sk[2]) && isfinite(sk[3]))) { \
+                    status[r] = 1; end = 1;                                                    \
+                } else if (fabs((double)sk[0]) > (double)xlim || fabs((double)sk[2]) > (double)thlim) { \
+                    end = 1;                                                                   \
+                } else if (++t[k] >= max_steps) {                                              \
+                    end = 1;                                                                   \
+                }                                                                              \
+                if (end) { steps[r] = t[k]; row[k] = -1; --live; }                             \
+            }                                                                                  \
+        }                                                                                      \
     }                                                                                          \
 }
-DEFINE_SNN_LOOP(snn_loop_f32, izh_f32_row, plant_f32, float, sinf, cosf, expf, f32)
-DEFINE_SNN_LOOP(snn_loop_f64, izh_f64_row, plant_f64, double, sin, cos, exp, f64)
+DEFINE_SNN_LOOP(snn_loop_f32, izh_f32_lanes, plant_f32, float, expf, f32)
+DEFINE_SNN_LOOP(snn_loop_f64, izh_f64_lanes, plant_f64, double, exp, f64)
 
-#define DEFINE_SIG_LOOP(NAME, PLANT, T, EXP)                                                   \
+/* One network update of LANES sigmoid networks (lane k: values y[k*n ..], weights W[k]):
+   y_j <- 1 / (1 + exp(-slope * sum_i y_i W_ij)), the sum over i ascending, as the reference. */
+#define DEFINE_SIG_UPDATE(NAME, T, EXP)                                                        \
+static inline void NAME(T *y, const T *const *W, int64_t n, T slope) {                         \
+    T acc[LANES * MAXN];                                                                       \
+    for (int k = 0; k < LANES; ++k) {                                                          \
+        const T *yk = y + k * n, *Wk = W[k];                                                   \
+        T *ak = acc + k * n;                                                                   \
+        for (int64_t j = 0; j < n; ++j) ak[j] = 0;                                             \
+        for (int64_t i = 0; i < n; ++i)                                                        \
+            for (int64_t j = 0; j < n; ++j) ak[j] += yk[i] * Wk[i * n + j];                    \
+    }                                                                                          \
+    for (int64_t j = 0; j < LANES * n; ++j) y[j] = (T)1 / ((T)1 + EXP(-(slope * acc[j])));     \
+}
+DEFINE_SIG_UPDATE(sig_update_f32, float, expf)
+DEFINE_SIG_UPDATE(sig_update_f64, double, exp)
+
+#define DEFINE_SIG_LOOP(NAME, UPDATE, PLANT, T)                                                \
 /* inputs: state variables obs[k] scaled by lim[k] to [0, 1]; bang: F = +-10 N on y > 0.5 */   \
 void NAME(const T *w, const T *state0, int64_t *steps, int64_t *status, int64_t rows,          \
           int64_t n, int64_t n_in, int64_t first_out, int64_t max_steps, int64_t updates,      \
           const int64_t *obs, const T *lim, int64_t bang,                                      \
           T slope, T tau, T g, T total, T mp, T mpl, T l, T xlim, T thlim, int threads) {      \
-    _Pragma("omp parallel for schedule(dynamic, 4) num_threads(threads)")                      \
-    for (int64_t r = 0; r < rows; ++r) {                                                       \
-        T y[MAXN], yn[MAXN], in[8];                                                            \
-        const T *W = w + r * n * n;                                                            \
-        T s[4] = {state0[4 * r], state0[4 * r + 1], state0[4 * r + 2], state0[4 * r + 3]};      \
-        for (int64_t j = 0; j < n; ++j) y[j] = 0;                                              \
-        int64_t t = 0; status[r] = 0;                                                          \
-        for (; t < max_steps; ++t) {                                                           \
-            for (int64_t k = 0; k < n_in; ++k) in[k] = NORM(T, s[obs[k]], lim[k]);             \
-            for (int64_t k = 0; k < updates; ++k) {                                            \
-                for (int64_t j = 0; j < n_in; ++j) y[j] = in[j];                               \
-                for (int64_t j = n_in; j < first_out; ++j) y[j] = 1;                           \
-                for (int64_t j = 0; j < n; ++j) {                                              \
-                    T acc = 0;                                                                 \
-                    for (int64_t i = 0; i < n; ++i) acc += y[i] * W[i * n + j];                \
-                    yn[j] = (T)1 / ((T)1 + EXP(-(slope * acc)));                               \
-                }                                                                              \
-                for (int64_t j = 0; j < n; ++j) y[j] = yn[j];                                  \
-                for (int64_t j = 0; j < n_in; ++j) y[j] = in[j];                               \
-                for (int64_t j = n_in; j < first_out; ++j) y[j] = 1;                           \
-            }                                                                                  \
-            T force = bang ? (y[first_out] > (T)0.5 ? (T)10.0 : (T)-10.0)                      \
-                           : (T)10.0 * ((T)2.0 * y[first_out] - (T)1.0);                       \
-            PLANT(s, force, tau, g, total, mp, mpl, l);                                        \
-            if (!(isfinite(s[0]) && isfinite(s[1]) && isfinite(s[2]) && isfinite(s[3]))) {     \
-                status[r] = 1; break;                                                          \
-            }                                                                                  \
-            if (fabs((double)s[0]) > (double)xlim || fabs((double)s[2]) > (double)thlim) break; \
+    int64_t next = 0;                                                                          \
+    _Pragma("omp parallel num_threads(threads)")                                               \
+    {                                                                                          \
+        T y[LANES * MAXN], in[LANES][8], s[LANES][4];                                          \
+        const T *W[LANES];                                                                     \
+        int64_t row[LANES], t[LANES];                                                          \
+        int live = 0;                                                                          \
+        for (int k = 0; k < LANES; ++k) {                                                      \
+            W[k] = w; row[k] = -1; s[k][0] = s[k][1] = s[k][2] = s[k][3] = 0;                  \
+            for (int64_t j = 0; j < n; ++j) y[k * n + j] = 0;                                  \
         }                                                                                      \
-        steps[r] = t;                                                                          \
+        for (;;) {                                                                             \
+            for (int k = 0; k < LANES; ++k) {                                                  \
+                while (row[k] < 0) {                                                           \
+                    int64_t r = next_row(&next, rows);                                         \
+                    if (r < 0) break;                                                          \
+                    status[r] = 0;                                                             \
+                    if (max_steps <= 0) { steps[r] = 0; continue; }                            \
+                    row[k] = r; t[k] = 0; W[k] = w + r * n * n; ++live;                        \
+                    for (int q = 0; q < 4; ++q) s[k][q] = state0[4 * r + q];                   \
+                    for (int64_t j = 0; j < n; ++j) y[k * n + j] = 0;                          \
+                }                                                                              \
+            }                                                                                  \
+            if (live == 0) break;                                                              \
+            for (int k = 0; k < LANES; ++k)                                                    \
+                for (int64_t q = 0; q < n_in; ++q) in[k][q] = NORM(T, s[k][obs[q]], lim[q]);   \
+            for (int64_t q = 0; q < updates; ++q) {                                            \
+                for (int k = 0; k < LANES; ++k) {                                              \
+                    T *yk = y + k * n;                                                         \
+                    for (int64_t j = 0; j < n_in; ++j) yk[j] = in[k][j];                       \
+                    for (int64_t j = n_in; j < first_out; ++j) yk[j] = 1;                      \
+                }                                                                              \
+                switch (n) {                                                                   \
+                    SIZE_CASES(UPDATE(y, W, N_, slope))                                        \
+                    default: UPDATE(y, W, n, slope);                                           \
+                }                                                                              \
+                for (int k = 0; k < LANES; ++k) {                                              \
+                    T *yk = y + k * n;                                                         \
+                    for (int64_t j = 0; j < n_in; ++j) yk[j] = in[k][j];                       \
+                    for (int64_t j = n_in; j < first_out; ++j) yk[j] = 1;                      \
+                }                                                                              \
+            }                                                                                  \
+            for (int k = 0; k < LANES; ++k) {                                                  \
+                int64_t r = row[k];                                                            \
+                if (r < 0) continue; /* an idle lane: its numbers are never read */           \
+                T out = y[k * n + first_out];                                                  \
+                T force = bang ? (out > (T)0.5 ? (T)10.0 : (T)-10.0) : (T)10.0 * ((T)2.0 * out - (T)1.0); \
+                T *sk = s[k];                                                                  \
+                PLANT(sk, force, tau, g, total, mp, mpl, l);                                   \
+                int end = 0;                                                                   \
+                if (!(isfinite(sk[0]) && isfinite(sk[1]) && isfinite(sk[2]) && isfinite(sk[3]))) { \
+                    status[r] = 1; end = 1;                                                    \
+                } else if (fabs((double)sk[0]) > (double)xlim || fabs((double)sk[2]) > (double)thlim) { \
+                    end = 1;                                                                   \
+                } else if (++t[k] >= max_steps) {                                              \
+                    end = 1;                                                                   \
+                }                                                                              \
+                if (end) { steps[r] = t[k]; row[k] = -1; --live; }                             \
+            }                                                                                  \
+        }                                                                                      \
     }                                                                                          \
 }
-DEFINE_SIG_LOOP(sig_loop_f32, plant_f32, float, expf)
-DEFINE_SIG_LOOP(sig_loop_f64, plant_f64, double, exp)
+DEFINE_SIG_LOOP(sig_loop_f32, sig_update_f32, plant_f32, float)
+DEFINE_SIG_LOOP(sig_loop_f64, sig_update_f64, plant_f64, double)
 
 /* Counter-based random numbers (splitmix64): a row's stream depends on its key alone. */
 static inline uint64_t mix64(uint64_t x) {

@@ -46,32 +46,26 @@ static inline void NAME##_heun(T v, T u, T i, T a, T b, T h, T *vo, T *uo) {    
     *vo = v + half * (dv1 + dv2);                                                              \
     *uo = u + half * (du1 + du2);                                                              \
 }                                                                                              \
-/* One substep of one network (n neurons, weights W[pre*n+post]) for neurons j >= first      \
-   (those below are driven from outside, e.g. Bernoulli inputs); adds spikes to cnt. */        \
-static inline void NAME##_substep(T *vv, T *uu, T *zz, const T *W, const T *I, T *cnt,        \
-                                  int64_t n, int64_t first, T dt, T a, T b, T c, T d, T vpeak) {\
-    T it[MAXN], v1[MAXN], u1[MAXN];                                                            \
-    /* synaptic input in the reference's order (k ascending); silent k add exactly 0 */        \
-    for (int64_t j = first; j < n; ++j) it[j] = 0;                                             \
-    for (int64_t k = 0; k < n; ++k) {                                                          \
-        if (zz[k] == 0) continue;                                                              \
-        const T *Wk = W + k * n;                                                               \
-        for (int64_t j = first; j < n; ++j) it[j] += zz[k] * Wk[j];                            \
-    }                                                                                          \
+/* Neurons [lo, hi) after their synaptic input is summed into it[]: Heun, then the sub-step \
+   reset where they spiked; adds spikes to cnt. */                                            \
+static inline void NAME##_update(T *vv, T *uu, T *zz, T *it, const T *I, T *cnt, int64_t lo,   \
+                                 int64_t hi, T dt, T a, T b, T c, T d, T vpeak) {              \
+    T v1[hi], u1[hi];                                                                          \
     int any = 0;                                                                               \
-    for (int64_t j = first; j < n; ++j) {                                                      \
+    for (int64_t j = lo; j < hi; ++j) {                                                        \
         it[j] = I[j] + it[j];                                                                  \
         NAME##_heun(vv[j], uu[j], it[j], a, b, dt, &v1[j], &u1[j]);                            \
         any |= !(v1[j] - vpeak < 0);                                                           \
     }                                                                                          \
     if (!any) {                                                                                \
-        for (int64_t j = first; j < n; ++j) { vv[j] = v1[j]; uu[j] = u1[j]; zz[j] = 0; }       \
+        for (int64_t j = lo; j < hi; ++j) { vv[j] = v1[j]; uu[j] = u1[j]; zz[j] = 0; }         \
         return;                                                                                \
     }                                                                                          \
-    /* Branch-free, so a constant n vectorises: every neuron's reset is computed and kept    \
+    /* Branch-free, so a constant size vectorises: every neuron's reset is computed and kept  \
        only where it spiked (v1 >= vpeak, or NaN, as the reference counts it). The kept     \
-       values come from the same operations as the reference's, so they are the same. */   \
-    for (int64_t j = first; j < n; ++j) {                                                      \
+       values come from the same operations as the reference's, so they are the same; a    \
+       neuron that did not spike keeps exactly the no-spike values. */                       \
+    for (int64_t j = lo; j < hi; ++j) {                                                        \
         int spiked = !(v1[j] - vpeak < 0);                                                     \
         T th = (vpeak - vv[j]) / (v1[j] - vv[j]);                                              \
         th = isnan(th) ? (T)0 : th;                                                            \
@@ -84,6 +78,32 @@ static inline void NAME##_substep(T *vv, T *uu, T *zz, const T *W, const T *I, T
         zz[j] = spiked ? (T)1 : (T)0;                                                          \
         cnt[j] += spiked ? (T)1 : (T)0;                                                        \
     }                                                                                          \
+}                                                                                              \
+/* Synaptic input to neurons j >= first of one network (weights W[pre*n+post]) in the        \
+   reference's order (pre ascending); silent neurons add exactly 0, so they are skipped. */    \
+static inline void NAME##_input(const T *zz, const T *W, T *it, int64_t n, int64_t first) {    \
+    for (int64_t j = first; j < n; ++j) it[j] = 0;                                             \
+    for (int64_t k = 0; k < n; ++k) {                                                          \
+        if (zz[k] == 0) continue;                                                              \
+        const T *Wk = W + k * n;                                                               \
+        for (int64_t j = first; j < n; ++j) it[j] += zz[k] * Wk[j];                            \
+    }                                                                                          \
+}                                                                                              \
+/* One substep of one network (n neurons) for neurons j >= first (those below are driven     \
+   from outside, e.g. Bernoulli inputs); adds spikes to cnt. */                                \
+static inline void NAME##_substep(T *vv, T *uu, T *zz, const T *W, const T *I, T *cnt,        \
+                                  int64_t n, int64_t first, T dt, T a, T b, T c, T d, T vpeak) {\
+    T it[MAXN];                                                                                \
+    NAME##_input(zz, W, it, n, first);                                                         \
+    NAME##_update(vv, uu, zz, it, I, cnt, first, n, dt, a, b, c, d, vpeak);                    \
+}                                                                                              \
+/* One substep of `lanes` networks of n neurons each, side by side (network k: neurons        \
+   k*n .. k*n+n-1, weights W[k]), so the core overlaps their independent work. */             \
+static inline void NAME##_lanes(T *vv, T *uu, T *zz, const T *const *W, const T *I, T *cnt,   \
+                                int64_t lanes, int64_t n, T dt, T a, T b, T c, T d, T vpeak) { \
+    T it[lanes * n];                                                                           \
+    for (int64_t k = 0; k < lanes; ++k) NAME##_input(zz + k * n, W[k], it + k * n, n, 0);      \
+    NAME##_update(vv, uu, zz, it, I, cnt, 0, lanes * n, dt, a, b, c, d, vpeak);                \
 }                                                                                              \
 static inline void NAME##_row(T *vv, T *uu, T *zz, const T *W, const T *I, T *cnt, int64_t n, \
                               int64_t substeps, T dt, T a, T b, T c, T d, T vpeak) {           \
