@@ -23,6 +23,8 @@ from tasks.cartpole import CartPoleParams, PlantError
 __all__ = ["loop_available", "spiking_loop", "sigmoid_loop", "markov_spiking_loop", "genome_keys"]
 
 _LOOP_SOURCE = r"""
+#include <stdlib.h>
+#include <string.h>
 #define DEFINE_PLANT(NAME, T)                                                                  \
 /* Explicit Euler as tasks.cartpole.cartpole_step, same operation order. */                    \
 /* mpl = m_pole * l and total = m_cart + m_pole come rounded from double, as in torch. */     \
@@ -36,212 +38,6 @@ static inline void NAME(T *s, T force, T tau, T g, T total, T mp, T mpl, T l) { 
 }
 DEFINE_PLANT(plant_f32, float)
 DEFINE_PLANT(plant_f64, double)
-
-#define NORM(T, v, lim) ({ T q_ = ((v) / (lim) + (T)1.0) * (T)0.5; q_ < 0 ? (T)0 : (q_ > 1 ? (T)1 : q_); })
-
-/* SIZE_CASES(CALL): `case k: CALL; break;` for k = 4..12 and 16, with N_ standing for k. */
-#define SIZE_CASE(K, CALL) case K: { enum { N_ = K }; CALL; break; }
-#define SIZE_CASES(CALL) SIZE_CASE(4, CALL) SIZE_CASE(5, CALL) SIZE_CASE(6, CALL) SIZE_CASE(7, CALL) \
-    SIZE_CASE(8, CALL) SIZE_CASE(9, CALL) SIZE_CASE(10, CALL) SIZE_CASE(11, CALL) SIZE_CASE(12, CALL) \
-    SIZE_CASE(16, CALL)
-
-/* Rate decoding over the window of the last `window` control steps (hist[k * n + j]: spikes
-   of node j in slot k), summed in slot order as the torch reference does. */
-#define DEFINE_DECODE(SUFFIX, T)                                                               \
-static inline T window_rate_##SUFFIX(const T *hist, int64_t window, int64_t n, int64_t j, T denom) { \
-    T sum = hist[j];                                                                           \
-    for (int64_t k = 1; k < window; ++k) sum += hist[k * n + j];                               \
-    return sum / denom;                                                                        \
-}                                                                                              \
-/* sum_j wo[j] (r_j - rest[j]) (rest NULL: 0), accumulated in double over j ascending. */      \
-static inline T weighted_rate_##SUFFIX(const T *hist, int64_t window, int64_t n, T denom,       \
-                                       const T *wo, const T *rest) {                           \
-    double acc = 0;                                                                            \
-    for (int64_t j = 0; j < n; ++j) {                                                          \
-        if (wo[j] == 0) continue; /* an absent connection adds exactly 0 */                    \
-        T rate = window_rate_##SUFFIX(hist, window, n, j, denom);                              \
-        if (rest) rate = rate - rest[j];                                                       \
-        acc += (double)(rate * wo[j]);                                                         \
-    }                                                                                          \
-    return (T)acc;                                                                             \
-}
-DEFINE_DECODE(f32, float)
-DEFINE_DECODE(f64, double)
-
-/* Lanes: each thread runs LANES episodes in lockstep, one network per lane, so the substep
-   works on LANES independent networks at once and the core overlaps what one network's
-   serial chain (matvec, Heun, reset, next matvec) would leave idle. A lane whose episode
-   ends takes the next row at once. Every lane's arithmetic is its network's alone, in the
-   reference's order, so a row's result does not depend on its lane or its neighbours. */
-#define LANES 8
-static inline int64_t next_row(int64_t *next, int64_t rows) {
-    int64_t r;
-    _Pragma("omp atomic capture")
-    r = (*next)++;
-    return r < rows ? r : -1;
-}
-
-/* status[r]: 0 ok, 1 the plant produced NaN or inf. */
-#define DEFINE_SNN_LOOP(NAME, LSUB, PLANT, T, EXP, SUFFIX)                                     \
-void NAME(const T *w, const T *wout, const T *sigma, const T *state0, int64_t *steps,         \
-          int64_t *status, int64_t rows, int64_t n, int64_t max_steps, int64_t substeps,      \
-          int64_t window, T dt, T a, T b, T c, T d, T vpeak, T ibg, T imax, T window_s,        \
-          T tau, T g, T total, T mp, T mpl, T l, T xlim, T thlim, int threads) {               \
-    int64_t next = 0;                                                                          \
-    _Pragma("omp parallel num_threads(threads)")                                               \
-    {                                                                                          \
-        T vv[LANES * MAXN], uu[LANES * MAXN], zz[LANES * MAXN], I[LANES * MAXN];              \
-        T cnt[LANES * MAXN], hist[LANES * 16 * MAXN], s[LANES][4];                             \
-        const T *W[LANES];                                                                     \
-        int64_t row[LANES], t[LANES];                                                          \
-        int live = 0;                                                                          \
-        for (int k = 0; k < LANES; ++k) {                                                      \
-            W[k] = w; row[k] = -1; s[k][0] = s[k][1] = s[k][2] = s[k][3] = 0;                  \
-            for (int64_t j = 0; j < n; ++j) { vv[k * n + j] = (T)-65.0; uu[k * n + j] = b * vv[k * n + j]; zz[k * n + j] = 0; } \
-        }                                                                                      \
-        for (;;) {                                                                             \
-            /* fill free lanes; rows with no steps to run finish here */                     \
-            for (int k = 0; k < LANES; ++k) {                                                  \
-                while (row[k] < 0) {                                                           \
-                    int64_t r = next_row(&next, rows);                                         \
-                    if (r < 0) break;                                                          \
-                    status[r] = 0;                                                             \
-                    if (max_steps <= 0) { steps[r] = 0; continue; }                            \
-                    row[k] = r; t[k] = 0; W[k] = w + r * n * n; ++live;                        \
-                    for (int q = 0; q < 4; ++q) s[k][q] = state0[4 * r + q];                   \
-                    for (int64_t j = 0; j < n; ++j) { vv[k * n + j] = (T)-65.0; uu[k * n + j] = b * vv[k * n + j]; zz[k * n + j] = 0; } \
-                    for (int64_t q = 0; q < window * n; ++q) hist[k * 16 * n + q] = 0;        \
-                }                                                                              \
-            }                                                                                  \
-            if (live == 0) break;                                                              \
-            for (int k = 0; k < LANES; ++k) {                                                  \
-                T xn = NORM(T, s[k][0], xlim), thn = NORM(T, s[k][2], thlim);                  \
-                T *Ik = I + k * n;                                                             \
-                for (int64_t j = 0; j < n; ++j) { Ik[j] = ibg; cnt[k * n + j] = 0; }          \
-                Ik[0] = ibg + imax * xn; Ik[1] = ibg + imax * thn;                             \
-            }                                                                                  \
-            /* a constant n for the usual sizes lets the compiler unroll and vectorise */    \
-            for (int64_t q = 0; q < substeps; ++q) {                                           \
-                switch (n) {                                                                   \
-                    SIZE_CASES(LSUB(vv, uu, zz, W, I, cnt, LANES, N_, dt, a, b, c, d, vpeak))         \
-                    default: LSUB(vv, uu, zz, W, I, cnt, LANES, n, dt, a, b, c, d, vpeak);          \
-                }                                                                              \
-            }                                                                                  \
-            for (int k = 0; k < LANES; ++k) {                                                  \
-                int64_t r = row[k];                                                            \
-                if (r < 0) continue; /* an idle lane: its numbers are never read */           \
-                T *hk = hist + k * 16 * n, *slot = hk + (t[k] % window) * n;                   \
-                for (int64_t j = 0; j < n; ++j) slot[j] = cnt[k * n + j];                      \
-                int64_t in_window = t[k] + 1 < window ? t[k] + 1 : window;                     \
-                T denom = (T)((double)in_window * (double)window_s);                           \
-                T drive = weighted_rate_##SUFFIX(hk, window, n, denom, wout + r * n, 0);       \
-                T fn = (T)1 / ((T)1 + EXP(-(sigma[r] * drive)));                               \
-                T force = (T)10.0 * ((T)2.0 * fn - (T)1.0);                                    \
-                T *sk = s[k];                                                                  \
-                PLANT(sk, force, tau, g, total, mp, mpl, l);                                   \
-                int end = 0;                                                                   \
-                if (!(isfinite(sk[0]) && isfinite(sk[1]) && isfinite(sk[2]) && isfinite(sk[3]))) { \
-                    status[r] = 1; end = 1;                                                    \
-                } else if (fabs((double)sk[0]) > (double)xlim || fabs((double)sk[2]) > (double)thlim) { \
-                    end = 1;                                                                   \
-                } else if (++t[k] >= max_steps) {                                              \
-                    end = 1;                                                                   \
-                }                                                                              \
-                if (end) { steps[r] = t[k]; row[k] = -1; --live; }                             \
-            }                                                                                  \
-        }                                                                                      \
-    }                                                                                          \
-}
-DEFINE_SNN_LOOP(snn_loop_f32, izh_f32_lanes, plant_f32, float, expf, f32)
-DEFINE_SNN_LOOP(snn_loop_f64, izh_f64_lanes, plant_f64, double, exp, f64)
-
-/* One network update of LANES sigmoid networks (lane k: values y[k*n ..], weights W[k]):
-   y_j <- 1 / (1 + exp(-slope * sum_i y_i W_ij)), the sum over i ascending, as the reference. */
-#define DEFINE_SIG_UPDATE(NAME, T, EXP)                                                        \
-static inline void NAME(T *y, const T *const *W, int64_t n, T slope) {                         \
-    T acc[LANES * MAXN];                                                                       \
-    for (int k = 0; k < LANES; ++k) {                                                          \
-        const T *yk = y + k * n, *Wk = W[k];                                                   \
-        T *ak = acc + k * n;                                                                   \
-        for (int64_t j = 0; j < n; ++j) ak[j] = 0;                                             \
-        for (int64_t i = 0; i < n; ++i)                                                        \
-            for (int64_t j = 0; j < n; ++j) ak[j] += yk[i] * Wk[i * n + j];                    \
-    }                                                                                          \
-    for (int64_t j = 0; j < LANES * n; ++j) y[j] = (T)1 / ((T)1 + EXP(-(slope * acc[j])));     \
-}
-DEFINE_SIG_UPDATE(sig_update_f32, float, expf)
-DEFINE_SIG_UPDATE(sig_update_f64, double, exp)
-
-#define DEFINE_SIG_LOOP(NAME, UPDATE, PLANT, T)                                                \
-/* inputs: state variables obs[k] scaled by lim[k] to [0, 1]; bang: F = +-10 N on y > 0.5 */   \
-void NAME(const T *w, const T *state0, int64_t *steps, int64_t *status, int64_t rows,          \
-          int64_t n, int64_t n_in, int64_t first_out, int64_t max_steps, int64_t updates,      \
-          const int64_t *obs, const T *lim, int64_t bang,                                      \
-          T slope, T tau, T g, T total, T mp, T mpl, T l, T xlim, T thlim, int threads) {      \
-    int64_t next = 0;                                                                          \
-    _Pragma("omp parallel num_threads(threads)")                                               \
-    {                                                                                          \
-        T y[LANES * MAXN], in[LANES][8], s[LANES][4];                                          \
-        const T *W[LANES];                                                                     \
-        int64_t row[LANES], t[LANES];                                                          \
-        int live = 0;                                                                          \
-        for (int k = 0; k < LANES; ++k) {                                                      \
-            W[k] = w; row[k] = -1; s[k][0] = s[k][1] = s[k][2] = s[k][3] = 0;                  \
-            for (int64_t j = 0; j < n; ++j) y[k * n + j] = 0;                                  \
-        }                                                                                      \
-        for (;;) {                                                                             \
-            for (int k = 0; k < LANES; ++k) {                                                  \
-                while (row[k] < 0) {                                                           \
-                    int64_t r = next_row(&next, rows);                                         \
-                    if (r < 0) break;                                                          \
-                    status[r] = 0;                                                             \
-                    if (max_steps <= 0) { steps[r] = 0; continue; }                            \
-                    row[k] = r; t[k] = 0; W[k] = w + r * n * n; ++live;                        \
-                    for (int q = 0; q < 4; ++q) s[k][q] = state0[4 * r + q];                   \
-                    for (int64_t j = 0; j < n; ++j) y[k * n + j] = 0;                          \
-                }                                                                              \
-            }                                                                                  \
-            if (live == 0) break;                                                              \
-            for (int k = 0; k < LANES; ++k)                                                    \
-                for (int64_t q = 0; q < n_in; ++q) in[k][q] = NORM(T, s[k][obs[q]], lim[q]);   \
-            for (int64_t q = 0; q < updates; ++q) {                                            \
-                for (int k = 0; k < LANES; ++k) {                                              \
-                    T *yk = y + k * n;                                                         \
-                    for (int64_t j = 0; j < n_in; ++j) yk[j] = in[k][j];                       \
-                    for (int64_t j = n_in; j < first_out; ++j) yk[j] = 1;                      \
-                }                                                                              \
-                switch (n) {                                                                   \
-                    SIZE_CASES(UPDATE(y, W, N_, slope))                                        \
-                    default: UPDATE(y, W, n, slope);                                           \
-                }                                                                              \
-                for (int k = 0; k < LANES; ++k) {                                              \
-                    T *yk = y + k * n;                                                         \
-                    for (int64_t j = 0; j < n_in; ++j) yk[j] = in[k][j];                       \
-                    for (int64_t j = n_in; j < first_out; ++j) yk[j] = 1;                      \
-                }                                                                              \
-            }                                                                                  \
-            for (int k = 0; k < LANES; ++k) {                                                  \
-                int64_t r = row[k];                                                            \
-                if (r < 0) continue; /* an idle lane: its numbers are never read */           \
-                T out = y[k * n + first_out];                                                  \
-                T force = bang ? (out > (T)0.5 ? (T)10.0 : (T)-10.0) : (T)10.0 * ((T)2.0 * out - (T)1.0); \
-                T *sk = s[k];                                                                  \
-                PLANT(sk, force, tau, g, total, mp, mpl, l);                                   \
-                int end = 0;                                                                   \
-                if (!(isfinite(sk[0]) && isfinite(sk[1]) && isfinite(sk[2]) && isfinite(sk[3]))) { \
-                    status[r] = 1; end = 1;                                                    \
-                } else if (fabs((double)sk[0]) > (double)xlim || fabs((double)sk[2]) > (double)thlim) { \
-                    end = 1;                                                                   \
-                } else if (++t[k] >= max_steps) {                                              \
-                    end = 1;                                                                   \
-                }                                                                              \
-                if (end) { steps[r] = t[k]; row[k] = -1; --live; }                             \
-            }                                                                                  \
-        }                                                                                      \
-    }                                                                                          \
-}
-DEFINE_SIG_LOOP(sig_loop_f32, sig_update_f32, plant_f32, float)
-DEFINE_SIG_LOOP(sig_loop_f64, sig_update_f64, plant_f64, double)
 
 /* Counter-based random numbers (splitmix64): a row's stream depends on its key alone. */
 static inline uint64_t mix64(uint64_t x) {
@@ -263,58 +59,291 @@ void row_keys(const unsigned char *data, int64_t rows, int64_t bytes_per_row, ui
     }
 }
 
+#define NORM(T, v, lim) ({ T q_ = ((v) / (lim) + (T)1.0) * (T)0.5; q_ < 0 ? (T)0 : (q_ > 1 ? (T)1 : q_); })
+
+/* Networks run at a padded size: 4..12, 16 or 24 nodes (else their own size), so the usual
+   sizes get code with the size a constant, which the compiler unrolls and vectorises. Padding
+   nodes have no connections and are held silent (neurons) or never read (sigmoid units), so
+   they change no number. */
+static inline int64_t padded_size(int64_t n) {
+    return n < 4 ? 4 : n <= 12 ? n : n <= 16 ? 16 : n <= 24 ? 24 : n;
+}
+#define SIZE_CASE(K, CALL) case K: { enum { N_ = K }; CALL; break; }
+/* SIZED(CALL_N, CALL): CALL_N with N_ the constant padded size np, or CALL for other sizes. */
+#define SIZED(CALL_N, CALL) switch (np) {                                                      \
+    SIZE_CASE(4, CALL_N) SIZE_CASE(5, CALL_N) SIZE_CASE(6, CALL_N) SIZE_CASE(7, CALL_N)        \
+    SIZE_CASE(8, CALL_N) SIZE_CASE(9, CALL_N) SIZE_CASE(10, CALL_N) SIZE_CASE(11, CALL_N)      \
+    SIZE_CASE(12, CALL_N) SIZE_CASE(16, CALL_N) SIZE_CASE(24, CALL_N) default: CALL; }
+/* LANE_WIDTHS(CALL): CALL with a constant L_, the active lanes rounded up to 1, 2, 4 or 8;
+   the lanes past `active` hold stale, finite numbers that nothing reads. */
+#define LANE_CASE(K, CALL) case K: { enum { L_ = K }; CALL; break; }
+#define LANE_WIDTHS(CALL) switch (active > 4 ? 8 : active > 2 ? 4 : active) {                  \
+    LANE_CASE(1, CALL) LANE_CASE(2, CALL) LANE_CASE(4, CALL) LANE_CASE(8, CALL) }
+
+/* Rate decoding over the window of the last `window` control steps (hist[k * np + j]: spikes
+   of node j in slot k), summed in slot order as the torch reference does. */
+#define DEFINE_DECODE(SUFFIX, T)                                                               \
+static inline T window_rate_##SUFFIX(const T *hist, int64_t window, int64_t np, int64_t j, T denom) { \
+    T sum = hist[j];                                                                           \
+    for (int64_t k = 1; k < window; ++k) sum += hist[k * np + j];                              \
+    return sum / denom;                                                                        \
+}                                                                                              \
+/* sum_j wo[j] (r_j - rest[j]) over the n real nodes (rest NULL: 0), accumulated in double    \
+   over j ascending. */                                                                        \
+static inline T weighted_rate_##SUFFIX(const T *hist, int64_t window, int64_t n, int64_t np,   \
+                                       T denom, const T *wo, const T *rest) {                  \
+    double acc = 0;                                                                            \
+    for (int64_t j = 0; j < n; ++j) {                                                          \
+        if (wo[j] == 0) continue; /* an absent connection adds exactly 0 */                    \
+        T rate = window_rate_##SUFFIX(hist, window, np, j, denom);                             \
+        if (rest) rate = rate - rest[j];                                                       \
+        acc += (double)(rate * wo[j]);                                                         \
+    }                                                                                          \
+    return (T)acc;                                                                             \
+}
+DEFINE_DECODE(f32, float)
+DEFINE_DECODE(f64, double)
+
+/* Lanes: each thread runs LANES episodes in lockstep, one network per lane, so the substep
+   works on LANES independent networks at once and the core overlaps what one network's
+   serial chain (matvec, Heun, reset, next matvec) would leave idle. A lane whose episode
+   ends takes the next row at once. Every lane's arithmetic is its network's alone, in the
+   reference's order, so a row's result does not depend on its lane or its neighbours. */
+#define LANES 8
+static inline int64_t next_row(int64_t *next, int64_t rows) {
+    int64_t r;
+    _Pragma("omp atomic capture")
+    r = (*next)++;
+    return r < rows ? r : -1;
+}
+/* Lane bookkeeping shared by the loops. Lanes [0, active) hold episodes: row[k] (-1 between
+   an episode's end and the next fill), t[k] steps done, s[k] the plant state, W[k] the
+   network's weights padded to np x np (a buffer the lane owns). */
+#define LANES_INIT(T)                                                                          \
+    int64_t np = padded_size(n);                                                               \
+    int64_t row[LANES], t[LANES]; T s[LANES][4]; int active = LANES;                           \
+    T *wbuf = (T *)calloc(LANES * np * np, sizeof(T)), *W[LANES];                              \
+    for (int k = 0; k < LANES; ++k) {                                                          \
+        row[k] = -1; t[k] = 0; s[k][0] = s[k][1] = s[k][2] = s[k][3] = 0; W[k] = wbuf + k * np * np; \
+    }
+#define UNPAREN(...) __VA_ARGS__
+/* Copy lane src's `len` values of arr (lanes `stride` apart) to lane k. */
+#define COPY_LANE(arr, len, stride) memcpy((arr) + k * (stride), (arr) + src * (stride), (len) * sizeof *(arr))
+/* Give every free lane the next row (copying its weights into the lane's buffer, then running
+   START with k the lane, r the row); rows with no steps to run finish at once. When rows run
+   out, the last lanes move into the free ones (MOVE copies lane src's own arrays to lane k),
+   so finished episodes cost nothing. */
+#define FILL_LANES(T, START, MOVE)                                                             \
+    for (int k = 0; k < active; ++k) {                                                         \
+        while (row[k] < 0) {                                                                   \
+            int64_t r = next_row(&next, rows);                                                 \
+            if (r < 0) break;                                                                  \
+            status[r] = 0;                                                                     \
+            if (max_steps <= 0) { steps[r] = 0; continue; }                                    \
+            row[k] = r; t[k] = 0;                                                              \
+            for (int q = 0; q < 4; ++q) s[k][q] = state0[4 * r + q];                           \
+            for (int64_t i = 0; i < n; ++i)                                                    \
+                for (int64_t j = 0; j < n; ++j) W[k][i * np + j] = w[(r * n + i) * n + j];     \
+            UNPAREN START                                                                      \
+        }                                                                                      \
+    }                                                                                          \
+    for (int k = 0; k < active;) {                                                             \
+        if (row[k] >= 0) { ++k; continue; }                                                    \
+        int src = --active;                                                                    \
+        if (src > k) {                                                                         \
+            T *wk = W[k];                                                                      \
+            row[k] = row[src]; t[k] = t[src]; W[k] = W[src]; W[src] = wk; row[src] = -1;       \
+            COPY_LANE(s[0], 4, 4);                                                             \
+            UNPAREN MOVE                                                                       \
+        }                                                                                      \
+    }
+/* After lane k's (row r's) plant step: the episode ends on NaN or inf (status 1), on leaving
+   the track or the angle limit, or after max_steps; steps[r] counts the steps survived. */
+#define END_STEP(T, k, r)                                                                      \
+    {                                                                                          \
+        const T *sk = s[k];                                                                    \
+        int end = 0;                                                                           \
+        if (!(isfinite(sk[0]) && isfinite(sk[1]) && isfinite(sk[2]) && isfinite(sk[3]))) {     \
+            status[r] = 1; end = 1;                                                            \
+        } else if (fabs((double)sk[0]) > (double)xlim || fabs((double)sk[2]) > (double)thlim) { \
+            end = 1;                                                                           \
+        } else if (++t[k] >= max_steps) {                                                      \
+            end = 1;                                                                           \
+        }                                                                                      \
+        if (end) { steps[r] = t[k]; row[k] = -1; }                                             \
+    }
+/* A spiking lane's fresh state: every neuron at rest, no spikes, an empty rate window. */
+#define SPIKING_START(T)                                                                       \
+    for (int64_t j = k * np; j < (k + 1) * np; ++j) { vv[j] = (T)-65.0; uu[j] = b * vv[j]; zz[j] = 0; } \
+    for (int64_t q = 0; q < 16 * np; ++q) hist[k * 16 * np + q] = 0;
+#define SPIKING_MOVE                                                                           \
+    COPY_LANE(vv, np, np); COPY_LANE(uu, np, np); COPY_LANE(zz, np, np); COPY_LANE(hist, 16 * np, 16 * np);
+
+/* status[r]: 0 ok, 1 the plant produced NaN or inf. */
+#define DEFINE_SNN_LOOP(NAME, LSUB, PLANT, T, EXP, SUFFIX)                                     \
+void NAME(const T *w, const T *wout, const T *sigma, const T *state0, int64_t *steps,         \
+          int64_t *status, int64_t rows, int64_t n, int64_t max_steps, int64_t substeps,      \
+          int64_t window, T dt, T a, T b, T c, T d, T vpeak, T ibg, T imax, T window_s,        \
+          T tau, T g, T total, T mp, T mpl, T l, T xlim, T thlim, int threads) {               \
+    int64_t next = 0;                                                                          \
+    _Pragma("omp parallel num_threads(threads)")                                               \
+    {                                                                                          \
+        T vv[LANES * MAXN], uu[LANES * MAXN], zz[LANES * MAXN], I[LANES * MAXN];              \
+        T cnt[LANES * MAXN], hist[LANES * 16 * MAXN];                                          \
+        LANES_INIT(T)                                                                          \
+        for (int k = 0; k < LANES; ++k) { SPIKING_START(T) }                                   \
+        for (;;) {                                                                             \
+            FILL_LANES(T, (SPIKING_START(T)), (SPIKING_MOVE))                                  \
+            if (active == 0) break;                                                            \
+            for (int k = 0; k < active; ++k) {                                                 \
+                T xn = NORM(T, s[k][0], xlim), thn = NORM(T, s[k][2], thlim);                  \
+                T *Ik = I + k * np;                                                            \
+                for (int64_t j = 0; j < np; ++j) { Ik[j] = ibg; cnt[k * np + j] = 0; }        \
+                Ik[0] = ibg + imax * xn; Ik[1] = ibg + imax * thn;                             \
+            }                                                                                  \
+            for (int64_t q = 0; q < substeps; ++q) {                                           \
+                LANE_WIDTHS(SIZED(LSUB(vv, uu, zz, (const T *const *)W, I, cnt, L_, N_, 0, n, dt, a, b, c, d, vpeak), \
+                                  LSUB(vv, uu, zz, (const T *const *)W, I, cnt, L_, np, 0, n, dt, a, b, c, d, vpeak))) \
+            }                                                                                  \
+            for (int k = 0; k < active; ++k) {                                                 \
+                int64_t r = row[k];                                                            \
+                T *hk = hist + k * 16 * np, *slot = hk + (t[k] % window) * np;                 \
+                for (int64_t j = 0; j < np; ++j) slot[j] = cnt[k * np + j];                    \
+                int64_t in_window = t[k] + 1 < window ? t[k] + 1 : window;                     \
+                T denom = (T)((double)in_window * (double)window_s);                           \
+                T drive = weighted_rate_##SUFFIX(hk, window, n, np, denom, wout + r * n, 0);   \
+                T fn = (T)1 / ((T)1 + EXP(-(sigma[r] * drive)));                               \
+                T force = (T)10.0 * ((T)2.0 * fn - (T)1.0);                                    \
+                PLANT(s[k], force, tau, g, total, mp, mpl, l);                                 \
+                END_STEP(T, k, r)                                                              \
+            }                                                                                  \
+        }                                                                                      \
+        free(wbuf);                                                                            \
+    }                                                                                          \
+}
+DEFINE_SNN_LOOP(snn_loop_f32, izh_f32_lanes, plant_f32, float, expf, f32)
+DEFINE_SNN_LOOP(snn_loop_f64, izh_f64_lanes, plant_f64, double, exp, f64)
+
+/* One network update of `lanes` sigmoid networks (lane k: values y[k*np ..], weights W[k]):
+   y_j <- 1 / (1 + exp(-slope * sum_i y_i W_ij)), the sum over the n real nodes i ascending,
+   as the reference; padding units (j >= n) get values nothing reads. */
+#define DEFINE_SIG_UPDATE(NAME, T, EXP)                                                        \
+static inline void NAME(T *y, const T *const *W, int64_t lanes, int64_t np, int64_t n, T slope) { \
+    T acc[lanes * np];                                                                         \
+    for (int64_t k = 0; k < lanes; ++k) {                                                      \
+        const T *yk = y + k * np, *Wk = W[k];                                                  \
+        T *ak = acc + k * np;                                                                  \
+        for (int64_t j = 0; j < np; ++j) ak[j] = 0;                                            \
+        for (int64_t i = 0; i < n; ++i)                                                        \
+            for (int64_t j = 0; j < np; ++j) ak[j] += yk[i] * Wk[i * np + j];                  \
+    }                                                                                          \
+    for (int64_t j = 0; j < lanes * np; ++j) y[j] = (T)1 / ((T)1 + EXP(-(slope * acc[j])));    \
+}
+DEFINE_SIG_UPDATE(sig_update_f32, float, expf)
+DEFINE_SIG_UPDATE(sig_update_f64, double, exp)
+
+#define DEFINE_SIG_LOOP(NAME, UPDATE, PLANT, T)                                                \
+/* inputs: state variables obs[k] scaled by lim[k] to [0, 1]; bang: F = +-10 N on y > 0.5 */   \
+void NAME(const T *w, const T *state0, int64_t *steps, int64_t *status, int64_t rows,          \
+          int64_t n, int64_t n_in, int64_t first_out, int64_t max_steps, int64_t updates,      \
+          const int64_t *obs, const T *lim, int64_t bang,                                      \
+          T slope, T tau, T g, T total, T mp, T mpl, T l, T xlim, T thlim, int threads) {      \
+    int64_t next = 0;                                                                          \
+    _Pragma("omp parallel num_threads(threads)")                                               \
+    {                                                                                          \
+        T y[LANES * MAXN], in[LANES][8];                                                       \
+        LANES_INIT(T)                                                                          \
+        for (int64_t j = 0; j < LANES * np; ++j) y[j] = 0;                                     \
+        for (;;) {                                                                             \
+            FILL_LANES(T, (for (int64_t j = k * np; j < (k + 1) * np; ++j) y[j] = 0;),         \
+                       (COPY_LANE(y, np, np);))                                                \
+            if (active == 0) break;                                                            \
+            for (int k = 0; k < active; ++k)                                                   \
+                for (int64_t q = 0; q < n_in; ++q) in[k][q] = NORM(T, s[k][obs[q]], lim[q]);   \
+            for (int64_t q = 0; q < updates; ++q) {                                            \
+                for (int k = 0; k < active; ++k) {                                             \
+                    T *yk = y + k * np;                                                        \
+                    for (int64_t j = 0; j < n_in; ++j) yk[j] = in[k][j];                       \
+                    for (int64_t j = n_in; j < first_out; ++j) yk[j] = 1;                      \
+                }                                                                              \
+                LANE_WIDTHS(SIZED(UPDATE(y, (const T *const *)W, L_, N_, n, slope),            \
+                                  UPDATE(y, (const T *const *)W, L_, np, n, slope)))           \
+                for (int k = 0; k < active; ++k) {                                             \
+                    T *yk = y + k * np;                                                        \
+                    for (int64_t j = 0; j < n_in; ++j) yk[j] = in[k][j];                       \
+                    for (int64_t j = n_in; j < first_out; ++j) yk[j] = 1;                      \
+                }                                                                              \
+            }                                                                                  \
+            for (int k = 0; k < active; ++k) {                                                 \
+                int64_t r = row[k];                                                            \
+                T out = y[k * np + first_out];                                                 \
+                T force = bang ? (out > (T)0.5 ? (T)10.0 : (T)-10.0) : (T)10.0 * ((T)2.0 * out - (T)1.0); \
+                PLANT(s[k], force, tau, g, total, mp, mpl, l);                                 \
+                END_STEP(T, k, r)                                                              \
+            }                                                                                  \
+        }                                                                                      \
+        free(wbuf);                                                                            \
+    }                                                                                          \
+}
+DEFINE_SIG_LOOP(sig_loop_f32, sig_update_f32, plant_f32, float)
+DEFINE_SIG_LOOP(sig_loop_f64, sig_update_f64, plant_f64, double)
+
 /* Markov task: n_in Bernoulli input nodes fire in each substep with probability norm * pmax.
    wout == NULL: F = +10 N when the output neuron's rate over the window exceeds thr_hz, else -10 N.
    wout != NULL: the output node decodes, as in the non-Markov task, from the rates r_j of the
    nodes wired to it (inputs included): F = +10 N when sum_j wout[j] (r_j - rest[j]) exceeds
    thr_hz, else -10 N. */
-#define DEFINE_MARKOV_LOOP(NAME, SUBSTEP, PLANT, T, SUFFIX)                                            \
-void NAME(const T *w, const T *wout, const T *rest, const uint64_t *keys, const T *state0, int64_t *steps,    \
+#define DEFINE_MARKOV_LOOP(NAME, LSUB, PLANT, T, SUFFIX)                                       \
+void NAME(const T *w, const T *wout, const T *rest, const uint64_t *keys, const T *state0, int64_t *steps, \
           int64_t *status, int64_t rows, int64_t n, int64_t n_in, int64_t out, int64_t max_steps, \
           int64_t substeps, int64_t window, const int64_t *obs, const T *lim,                   \
           T dt, T a, T b, T c, T d, T vpeak, T ibg, T pmax, T thr_hz, T window_s,              \
           T tau, T g, T total, T mp, T mpl, T l, T xlim, T thlim, int threads) {               \
-    _Pragma("omp parallel for schedule(dynamic, 4) num_threads(threads)")                      \
-    for (int64_t r = 0; r < rows; ++r) {                                                       \
-        T vv[MAXN], uu[MAXN], zz[MAXN], I[MAXN], cnt[MAXN], hist[16 * MAXN], p[8];            \
-        const T *W = w + r * n * n;                                                            \
-        const T *WO = wout ? wout + r * n : 0;                                                 \
-        T s[4] = {state0[4 * r], state0[4 * r + 1], state0[4 * r + 2], state0[4 * r + 3]};      \
-        for (int64_t j = 0; j < n; ++j) { vv[j] = (T)-65.0; uu[j] = b * vv[j]; zz[j] = 0; I[j] = ibg; } \
-        for (int64_t k = 0; k < window * n; ++k) hist[k] = 0;                                  \
-        uint64_t counter = 0;                                                                  \
-        int64_t t = 0; status[r] = 0;                                                          \
-        for (; t < max_steps; ++t) {                                                           \
-            for (int64_t k = 0; k < n_in; ++k) p[k] = NORM(T, s[obs[k]], lim[k]) * pmax;       \
-            for (int64_t j = 0; j < n; ++j) cnt[j] = 0;                                        \
+    int64_t next = 0;                                                                          \
+    _Pragma("omp parallel num_threads(threads)")                                               \
+    {                                                                                          \
+        T vv[LANES * MAXN], uu[LANES * MAXN], zz[LANES * MAXN], I[LANES * MAXN];              \
+        T cnt[LANES * MAXN], hist[LANES * 16 * MAXN], p[LANES][8];                             \
+        uint64_t counter[LANES];                                                               \
+        LANES_INIT(T)                                                                          \
+        for (int64_t j = 0; j < LANES * np; ++j) I[j] = ibg;                                   \
+        for (int k = 0; k < LANES; ++k) { SPIKING_START(T) counter[k] = 0; }                   \
+        for (;;) {                                                                             \
+            FILL_LANES(T, (SPIKING_START(T) counter[k] = 0;), (SPIKING_MOVE counter[k] = counter[src];)) \
+            if (active == 0) break;                                                            \
+            for (int k = 0; k < active; ++k) {                                                 \
+                for (int64_t q = 0; q < n_in; ++q) p[k][q] = NORM(T, s[k][obs[q]], lim[q]) * pmax; \
+                for (int64_t j = k * np; j < (k + 1) * np; ++j) cnt[j] = 0;                   \
+            }                                                                                  \
             for (int64_t q = 0; q < substeps; ++q) {                                           \
-                for (int64_t k = 0; k < n_in; ++k) {                                           \
-                    zz[k] = uniform01(keys[r], counter++) < (double)p[k] ? (T)1 : (T)0;        \
-                    cnt[k] += zz[k];                                                           \
+                for (int k = 0; k < active; ++k) {                                             \
+                    for (int64_t i = 0; i < n_in; ++i) {                                       \
+                        T z = uniform01(keys[row[k]], counter[k]++) < (double)p[k][i] ? (T)1 : (T)0; \
+                        zz[k * np + i] = z;                                                    \
+                        cnt[k * np + i] += z;                                                  \
+                    }                                                                          \
                 }                                                                              \
-                switch (n) {                                                               \
-                    SIZE_CASES(SUBSTEP(vv, uu, zz, W, I, cnt, N_, n_in, dt, a, b, c, d, vpeak)) \
-                    default: SUBSTEP(vv, uu, zz, W, I, cnt, n, n_in, dt, a, b, c, d, vpeak);  \
-                }                                                                          \
+                LANE_WIDTHS(SIZED(LSUB(vv, uu, zz, (const T *const *)W, I, cnt, L_, N_, n_in, n, dt, a, b, c, d, vpeak), \
+                                  LSUB(vv, uu, zz, (const T *const *)W, I, cnt, L_, np, n_in, n, dt, a, b, c, d, vpeak))) \
             }                                                                                  \
-            T *slot = hist + (t % window) * n;                                                 \
-            for (int64_t j = 0; j < n; ++j) slot[j] = cnt[j];                                  \
-            int64_t in_window = t + 1 < window ? t + 1 : window;                               \
-            T denom = (T)((double)in_window * (double)window_s);                               \
-            T drive = WO ? weighted_rate_##SUFFIX(hist, window, n, denom, WO, rest)            \
-                         : window_rate_##SUFFIX(hist, window, n, out, denom);                  \
-            T force = drive > thr_hz ? (T)10.0 : (T)-10.0;                                     \
-            PLANT(s, force, tau, g, total, mp, mpl, l);                                        \
-            if (!(isfinite(s[0]) && isfinite(s[1]) && isfinite(s[2]) && isfinite(s[3]))) {     \
-                status[r] = 1; break;                                                          \
+            for (int k = 0; k < active; ++k) {                                                 \
+                int64_t r = row[k];                                                            \
+                T *hk = hist + k * 16 * np, *slot = hk + (t[k] % window) * np;                 \
+                for (int64_t j = 0; j < np; ++j) slot[j] = cnt[k * np + j];                    \
+                int64_t in_window = t[k] + 1 < window ? t[k] + 1 : window;                     \
+                T denom = (T)((double)in_window * (double)window_s);                           \
+                T drive = wout ? weighted_rate_##SUFFIX(hk, window, n, np, denom, wout + r * n, rest) \
+                               : window_rate_##SUFFIX(hk, window, np, out, denom);             \
+                T force = drive > thr_hz ? (T)10.0 : (T)-10.0;                                 \
+                PLANT(s[k], force, tau, g, total, mp, mpl, l);                                 \
+                END_STEP(T, k, r)                                                              \
             }                                                                                  \
-            if (fabs((double)s[0]) > (double)xlim || fabs((double)s[2]) > (double)thlim) break; \
         }                                                                                      \
-        steps[r] = t;                                                                          \
+        free(wbuf);                                                                            \
     }                                                                                          \
 }
-DEFINE_MARKOV_LOOP(markov_loop_f32, izh_f32_substep, plant_f32, float, f32)
-DEFINE_MARKOV_LOOP(markov_loop_f64, izh_f64_substep, plant_f64, double, f64)
+DEFINE_MARKOV_LOOP(markov_loop_f32, izh_f32_lanes, plant_f32, float, f32)
+DEFINE_MARKOV_LOOP(markov_loop_f64, izh_f64_lanes, plant_f64, double, f64)
 """
 
 MAX_WINDOW = 16

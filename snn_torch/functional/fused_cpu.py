@@ -35,6 +35,7 @@ ROW_SOURCE = r"""
 #include <stdint.h>
 #define MAXN 256
 
+#define OWN(j) (all || own[j])
 #define DEFINE_ROW(NAME, T)                                                                    \
 static inline void NAME##_heun(T v, T u, T i, T a, T b, T h, T *vo, T *uo) {                  \
     T dv1 = ((T)0.04 * v + (T)5.0) * v + (T)140.0 - u + i;                                     \
@@ -46,69 +47,83 @@ static inline void NAME##_heun(T v, T u, T i, T a, T b, T h, T *vo, T *uo) {    
     *vo = v + half * (dv1 + dv2);                                                              \
     *uo = u + half * (du1 + du2);                                                              \
 }                                                                                              \
-/* Neurons [lo, hi) after their synaptic input is summed into it[]: Heun, then the sub-step \
-   reset where they spiked; adds spikes to cnt. */                                            \
-static inline void NAME##_update(T *vv, T *uu, T *zz, T *it, const T *I, T *cnt, int64_t lo,   \
-                                 int64_t hi, T dt, T a, T b, T c, T d, T vpeak) {              \
-    T v1[hi], u1[hi];                                                                          \
+/* Neurons [0, count) of networks of n neurons side by side, after their synaptic input is     \
+   summed into it[]: Heun, then the sub-step reset where they spiked; adds spikes to cnt.      \
+   Unless `all`, only neurons first <= j < n_real of each network are updated: those below     \
+   `first` are driven from outside (their z and counts set by the caller), those from n_real   \
+   on pad the network and stay silent. `all` is a constant after inlining, so the usual        \
+   case carries no mask. */                                                                    \
+static inline void NAME##_update_(T *vv, T *uu, T *zz, const T *it, const T *I, T *cnt,        \
+                                  int64_t count, int64_t n, int64_t first, int64_t n_real,     \
+                                  T dt, T a, T b, T c, T d, T vpeak, const int all) {          \
+    T v1[count], u1[count], in[count];                                                         \
+    unsigned char own[all ? 1 : count];                                                        \
+    if (!all)                                                                                  \
+        for (int64_t k = 0; k < count; k += n)                                                 \
+            for (int64_t j = 0; j < n; ++j) own[k + j] = j >= first && j < n_real;             \
     int any = 0;                                                                               \
-    for (int64_t j = lo; j < hi; ++j) {                                                        \
-        it[j] = I[j] + it[j];                                                                  \
-        NAME##_heun(vv[j], uu[j], it[j], a, b, dt, &v1[j], &u1[j]);                            \
-        any |= !(v1[j] - vpeak < 0);                                                           \
+    for (int64_t j = 0; j < count; ++j) {                                                      \
+        in[j] = I[j] + it[j];                                                                  \
+        NAME##_heun(vv[j], uu[j], in[j], a, b, dt, &v1[j], &u1[j]);                            \
+        any |= !(v1[j] - vpeak < 0) & OWN(j);                                                  \
     }                                                                                          \
     if (!any) {                                                                                \
-        for (int64_t j = lo; j < hi; ++j) { vv[j] = v1[j]; uu[j] = u1[j]; zz[j] = 0; }         \
+        for (int64_t j = 0; j < count; ++j) {                                                  \
+            vv[j] = OWN(j) ? v1[j] : vv[j]; uu[j] = OWN(j) ? u1[j] : uu[j]; zz[j] = OWN(j) ? (T)0 : zz[j];\
+        }                                                                                      \
         return;                                                                                \
     }                                                                                          \
     /* Branch-free, so a constant size vectorises: every neuron's reset is computed and kept  \
        only where it spiked (v1 >= vpeak, or NaN, as the reference counts it). The kept     \
        values come from the same operations as the reference's, so they are the same; a    \
        neuron that did not spike keeps exactly the no-spike values. */                       \
-    for (int64_t j = lo; j < hi; ++j) {                                                        \
+    for (int64_t j = 0; j < count; ++j) {                                                      \
         int spiked = !(v1[j] - vpeak < 0);                                                     \
         T th = (vpeak - vv[j]) / (v1[j] - vv[j]);                                              \
         th = isnan(th) ? (T)0 : th;                                                            \
         th = th < 0 ? (T)0 : (th > 1 ? (T)1 : th);                                             \
         T ur = uu[j] + th * (u1[j] - uu[j]) + d;                                               \
         T vr = (T)0 + c, vs, us;                                                               \
-        NAME##_heun(vr, ur, it[j], a, b, ((T)1.0 - th) * dt, &vs, &us);                        \
-        vv[j] = spiked ? vs : v1[j];                                                           \
-        uu[j] = spiked ? us : u1[j];                                                           \
-        zz[j] = spiked ? (T)1 : (T)0;                                                          \
-        cnt[j] += spiked ? (T)1 : (T)0;                                                        \
+        NAME##_heun(vr, ur, in[j], a, b, ((T)1.0 - th) * dt, &vs, &us);                        \
+        T vn = spiked ? vs : v1[j], un = spiked ? us : u1[j];                                  \
+        vv[j] = OWN(j) ? vn : vv[j];                                                           \
+        uu[j] = OWN(j) ? un : uu[j];                                                           \
+        zz[j] = OWN(j) ? (spiked ? (T)1 : (T)0) : zz[j];                                       \
+        cnt[j] += OWN(j) & spiked ? (T)1 : (T)0;                                               \
     }                                                                                          \
 }                                                                                              \
-/* Synaptic input to neurons j >= first of one network (weights W[pre*n+post]) in the        \
-   reference's order (pre ascending); silent neurons add exactly 0, so they are skipped. */    \
-static inline void NAME##_input(const T *zz, const T *W, T *it, int64_t n, int64_t first) {    \
-    for (int64_t j = first; j < n; ++j) it[j] = 0;                                             \
+static inline void NAME##_update(T *vv, T *uu, T *zz, const T *it, const T *I, T *cnt,         \
+                                 int64_t count, int64_t n, int64_t first, int64_t n_real,      \
+                                 T dt, T a, T b, T c, T d, T vpeak) {                          \
+    if (first == 0 && n_real == n)                                                             \
+        NAME##_update_(vv, uu, zz, it, I, cnt, count, n, first, n_real, dt, a, b, c, d, vpeak, 1);\
+    else                                                                                       \
+        NAME##_update_(vv, uu, zz, it, I, cnt, count, n, first, n_real, dt, a, b, c, d, vpeak, 0);\
+}                                                                                              \
+/* Synaptic input to one network's neurons (weights W[pre*n+post]) in the reference's order \
+   (pre ascending); silent neurons add exactly 0, so they are skipped. */                      \
+static inline void NAME##_input(const T *zz, const T *W, T *it, int64_t n) {                   \
+    for (int64_t j = 0; j < n; ++j) it[j] = 0;                                                 \
     for (int64_t k = 0; k < n; ++k) {                                                          \
         if (zz[k] == 0) continue;                                                              \
         const T *Wk = W + k * n;                                                               \
-        for (int64_t j = first; j < n; ++j) it[j] += zz[k] * Wk[j];                            \
+        for (int64_t j = 0; j < n; ++j) it[j] += zz[k] * Wk[j];                                \
     }                                                                                          \
 }                                                                                              \
-/* One substep of one network (n neurons) for neurons j >= first (those below are driven     \
-   from outside, e.g. Bernoulli inputs); adds spikes to cnt. */                                \
-static inline void NAME##_substep(T *vv, T *uu, T *zz, const T *W, const T *I, T *cnt,        \
-                                  int64_t n, int64_t first, T dt, T a, T b, T c, T d, T vpeak) {\
-    T it[MAXN];                                                                                \
-    NAME##_input(zz, W, it, n, first);                                                         \
-    NAME##_update(vv, uu, zz, it, I, cnt, first, n, dt, a, b, c, d, vpeak);                    \
-}                                                                                              \
 /* One substep of `lanes` networks of n neurons each, side by side (network k: neurons        \
-   k*n .. k*n+n-1, weights W[k]), so the core overlaps their independent work. */             \
+   k*n .. k*n+n-1, weights W[k]), so the core overlaps their independent work; neurons below  \
+   `first` in each network are driven from outside (e.g. Bernoulli inputs). */               \
 static inline void NAME##_lanes(T *vv, T *uu, T *zz, const T *const *W, const T *I, T *cnt,   \
-                                int64_t lanes, int64_t n, T dt, T a, T b, T c, T d, T vpeak) { \
+                                int64_t lanes, int64_t n, int64_t first, int64_t n_real,       \
+                                T dt, T a, T b, T c, T d, T vpeak) {                           \
     T it[lanes * n];                                                                           \
-    for (int64_t k = 0; k < lanes; ++k) NAME##_input(zz + k * n, W[k], it + k * n, n, 0);      \
-    NAME##_update(vv, uu, zz, it, I, cnt, 0, lanes * n, dt, a, b, c, d, vpeak);                \
+    for (int64_t k = 0; k < lanes; ++k) NAME##_input(zz + k * n, W[k], it + k * n, n);         \
+    NAME##_update(vv, uu, zz, it, I, cnt, lanes * n, n, first, n_real, dt, a, b, c, d, vpeak); \
 }                                                                                              \
 static inline void NAME##_row(T *vv, T *uu, T *zz, const T *W, const T *I, T *cnt, int64_t n, \
                               int64_t substeps, T dt, T a, T b, T c, T d, T vpeak) {           \
     for (int64_t s = 0; s < substeps; ++s)                                                     \
-        NAME##_substep(vv, uu, zz, W, I, cnt, n, 0, dt, a, b, c, d, vpeak);                    \
+        NAME##_lanes(vv, uu, zz, &W, I, cnt, 1, n, 0, n, dt, a, b, c, d, vpeak);                \
 }
 
 DEFINE_ROW(izh_f32, float)

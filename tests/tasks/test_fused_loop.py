@@ -132,3 +132,55 @@ def test_torch_genome_keys_equal_the_kernels():
     assert torch.equal(fnv1a_keys(x), genome_keys(x))
     assert len(set(fnv1a_keys(x).tolist())) == 7
     assert torch.equal(fnv1a_keys(x[3:4]), fnv1a_keys(x)[3:4])
+
+
+def _random_genomes(n_nodes, batch, seed=0):
+    """Random recurrent networks of ``n_nodes`` nodes (2 inputs, 1 output), float64."""
+    from evolution.config import NEATConfig
+    from evolution.population import Genomes
+
+    cfg = NEATConfig(num_inputs=2, num_outputs=1, num_bias=0, max_hidden=n_nodes - 3, pop_size=batch)
+    gen = torch.Generator().manual_seed(seed)
+    conn = torch.rand(1, batch, n_nodes, n_nodes, generator=gen) < 0.4
+    conn[..., :, :2] = False  # nothing feeds an input
+    w = torch.where(conn, torch.randn(1, batch, n_nodes, n_nodes, generator=gen, dtype=torch.float64) * 2.0, 0.0)
+    g = Genomes(weight=w, conn=conn, enabled=conn.clone(), node=torch.ones(1, batch, n_nodes, dtype=torch.bool),
+                sigma=torch.full((1, batch), 0.005, dtype=torch.float64))
+    return g, cfg
+
+
+@pytest.mark.parametrize("controller", ["snn", "sigmoid"])
+@pytest.mark.parametrize("n_nodes", [6, 14, 20, 27])
+def test_kernel_equals_torch_loop_at_padded_and_unpadded_sizes(controller, n_nodes):
+    """14 and 20 nodes run padded to 16 and 24, 27 at its own size: the padding changes no number."""
+    g, cfg = _random_genomes(n_nodes, 64, seed=n_nodes)
+    start = nonmarkov_start(64, dtype=torch.float64)
+    fused = _policy(controller, g, cfg, True)
+    assert fused.loop_fused
+    steps_fused, _ = closed_loop(fused, start, tau_s=0.01, max_steps=300)
+    steps_ref, _ = closed_loop(_policy(controller, g, cfg, False), start, tau_s=0.01, max_steps=300)
+    assert len(set(steps_ref.tolist())) > 3  # networks that differ, so a mix-up would show
+    assert torch.equal(steps_fused, steps_ref)
+
+
+def test_markov_row_result_does_not_depend_on_batch_or_lane():
+    """Rows share a thread's lanes and move between them as episodes end; a row's result is
+    still what it is alone, in any order of the batch."""
+    from tasks.controllers import MarkovSpikingPolicy, MarkovSpikingSpec
+    from tasks.experiments.cartpole import markov_start
+
+    g, cfg = _markov_evolved(torch.float32)
+    B = g.num_runs * g.pop_size
+
+    def steps(genomes):
+        n = genomes.num_runs * genomes.pop_size
+        policy = MarkovSpikingPolicy(genomes, cfg, MarkovSpikingSpec(), 0.02, DEFAULT_PLANT)
+        assert policy.loop_fused
+        return closed_loop(policy, markov_start(n), tau_s=0.02, max_steps=400)[0]
+
+    all_steps = steps(g)
+    assert len(set(all_steps.tolist())) > 3
+    reverse = torch.arange(B - 1, -1, -1).unsqueeze(0)
+    assert torch.equal(steps(g.gather(reverse)), all_steps.flip(0))
+    for i in (0, 5, B - 1):
+        assert steps(g.gather(torch.tensor([[i]]))).item() == all_steps[i].item()
