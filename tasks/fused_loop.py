@@ -1,10 +1,12 @@
-"""The non-Markov cart-pole closed loop as one C kernel: plant, encoder, network, decoder.
+"""The cart-pole closed loops as C kernels: plant, encoder, network, decoder.
 
 ``tasks.controllers.closed_loop`` is the readable reference: a few dozen torch ops per
-control step over the whole batch. This kernel runs each batch row's whole episode in one C
-loop (rows spread over threads), so a row stops costing anything the moment it fails, no
-Python runs per control step, and a row's result depends on nothing but its own genome: the
-same in any batch, with any thread count. The arithmetic repeats the reference's operations
+control step over the whole batch. These kernels run whole episodes in C: each thread keeps
+8 episodes in lockstep lanes (one network per lane, so the core overlaps their independent
+work), a lane whose episode ends takes the next batch row at once, and when rows run out
+the last lanes move into the free ones. So a row stops costing anything the moment it
+fails, no Python runs per control step, and a row's result depends on nothing but its own
+genome: the same in any batch, lane or position, with any thread count. The arithmetic repeats the reference's operations
 in order (no contraction); only ``sin``, ``cos`` and ``exp`` come from the C library rather
 than torch's vectorised versions, so the two paths agree to rounding (tested), not bit for bit.
 """
