@@ -28,15 +28,19 @@ _LOOP_SOURCE = r"""
 #include <stdlib.h>
 #include <string.h>
 #define DEFINE_PLANT(NAME, T)                                                                  \
-/* Explicit Euler as tasks.cartpole.cartpole_step, same operation order. */                    \
-/* mpl = m_pole * l and total = m_cart + m_pole come rounded from double, as in torch. */     \
-static inline void NAME(T *s, T force, T tau, T g, T total, T mp, T mpl, T l) {                \
+/* Explicit Euler as tasks.cartpole.cartpole_step, same operation order, given sn = sin(theta) \
+   and cs = cos(theta) (taken apart so a loop over lanes can call sin and cos first and then   \
+   vectorise the rest). mpl = m_pole * l and total = m_cart + m_pole come rounded from         \
+   double, as in torch. */                                                                     \
+static inline void NAME##_trig(T *s, T force, T sn, T cs, T tau, T g, T total, T mp, T mpl, T l) { \
     T x = s[0], xd = s[1], th = s[2], thd = s[3];                                              \
-    T sn = sin(th), cs = cos(th);                                                              \
-    T temp = (-force - mpl * thd * thd * sn) / total;                                            \
-    T thacc = (g * sn + cs * temp) / (l * ((T)(4.0 / 3.0) - mp * cs * cs / total));           \
-    T xacc = (force + mpl * (thd * thd * sn - thacc * cs)) / total;                             \
+    T temp = (-force - mpl * thd * thd * sn) / total;                                          \
+    T thacc = (g * sn + cs * temp) / (l * ((T)(4.0 / 3.0) - mp * cs * cs / total));            \
+    T xacc = (force + mpl * (thd * thd * sn - thacc * cs)) / total;                            \
     s[0] = x + tau * xd; s[1] = xd + tau * xacc; s[2] = th + tau * thd; s[3] = thd + tau * thacc; \
+}                                                                                              \
+static inline void NAME(T *s, T force, T tau, T g, T total, T mp, T mpl, T l) {                \
+    NAME##_trig(s, force, sin(s[2]), cos(s[2]), tau, g, total, mp, mpl, l);                    \
 }
 DEFINE_PLANT(plant_f32, float)
 DEFINE_PLANT(plant_f64, double)
@@ -226,23 +230,78 @@ void NAME(const T *w, const T *wout, const T *sigma, const T *state0, int64_t *s
 DEFINE_SNN_LOOP(snn_loop_f32, izh_f32_lanes, plant_f32, float, expf, f32)
 DEFINE_SNN_LOOP(snn_loop_f64, izh_f64_lanes, plant_f64, double, exp, f64)
 
+/* expf of many floats at once, equal bit for bit to glibc's expf (the algorithm of its
+   e_expf.c: x N / ln 2 = k + r, 2^(k/N) from a 32-entry table, a cubic in r, all in double),
+   written so the compiler vectorises it. Checked against glibc 2.36's expf on every float
+   with |x| < 88: two inputs round the other way, and they, with |x| >= 88, NaN and inf, go to
+   expf itself. tests/tasks/test_fused_loop.py checks a sample of all floats on the machine
+   it runs on. */
+static const uint64_t EXP2F_TABLE[32] = {
+    0x3ff0000000000000, 0x3fefd9b0d3158574, 0x3fefb5586cf9890f, 0x3fef9301d0125b51,
+    0x3fef72b83c7d517b, 0x3fef54873168b9aa, 0x3fef387a6e756238, 0x3fef1e9df51fdee1,
+    0x3fef06fe0a31b715, 0x3feef1a7373aa9cb, 0x3feedea64c123422, 0x3feece086061892d,
+    0x3feebfdad5362a27, 0x3feeb42b569d4f82, 0x3feeab07dd485429, 0x3feea47eb03a5585,
+    0x3feea09e667f3bcd, 0x3fee9f75e8ec5f74, 0x3feea11473eb0187, 0x3feea589994cce13,
+    0x3feeace5422aa0db, 0x3feeb737b0cdc5e5, 0x3feec49182a3f090, 0x3feed503b23e255d,
+    0x3feee89f995ad3ad, 0x3feeff76f2fb5e47, 0x3fef199bdd85529c, 0x3fef3720dcef9069,
+    0x3fef5818dcfba487, 0x3fef7c97337b9b5f, 0x3fefa4afa2a490da, 0x3fefd0765b6e4540
+};
+#define EXPF_HARD_1 0x1.04845ep+5f
+#define EXPF_HARD_2 -0x1.f8cbb2p+5f
+static inline __attribute__((always_inline)) void expf_many(const float *x, float *out, int64_t count) {
+    const double c0 = 0x1.c6af84b912394p-5 / 32 / 32 / 32, c1 = 0x1.ebfce50fac4f3p-3 / 32 / 32;
+    const double c2 = 0x1.62e42ff0c52d6p-1 / 32, inv_ln2_n = 0x1.71547652b82fep+0 * 32, shift = 0x1.8p+52;
+    int fix = 0;
+    for (int64_t j = 0; j < count; ++j) {
+        double z = inv_ln2_n * (double)x[j], kd = z + shift;
+        uint64_t ki, t;
+        memcpy(&ki, &kd, 8);
+        kd -= shift;
+        double r = z - kd, s;
+        t = EXP2F_TABLE[ki % 32] + (ki << 47);
+        memcpy(&s, &t, 8);
+        double p = c0 * r + c1, y = c2 * r + 1.0;
+        y = p * (r * r) + y;
+        out[j] = (float)(y * s);
+        fix |= !(fabsf(x[j]) < 88.0f) | (x[j] == EXPF_HARD_1) | (x[j] == EXPF_HARD_2);
+    }
+    if (fix)
+        for (int64_t j = 0; j < count; ++j)
+            if (!(fabsf(x[j]) < 88.0f) || x[j] == EXPF_HARD_1 || x[j] == EXPF_HARD_2) out[j] = expf(x[j]);
+}
+static inline void exp_many(const double *x, double *out, int64_t count) {
+    for (int64_t j = 0; j < count; ++j) out[j] = exp(x[j]);
+}
+/* For the tests: this library's expf_many and the C library's expf over n floats. */
+void expf_many_check(const float *x, float *ours, float *libm, int64_t n) {
+    expf_many(x, ours, n);
+    for (int64_t j = 0; j < n; ++j) libm[j] = expf(x[j]);
+}
+
 /* One network update of `lanes` sigmoid networks (lane k: values y[k*np ..], weights W[k]):
    y_j <- 1 / (1 + exp(-slope * sum_i y_i W_ij)), the sum over the n real nodes i ascending,
    as the reference; padding units (j >= n) get values nothing reads. */
-#define DEFINE_SIG_UPDATE(NAME, T, EXP)                                                        \
-static inline void NAME(T *y, const T *const *W, int64_t lanes, int64_t np, int64_t n, T slope) { \
+#define DEFINE_SIG_UPDATE(NAME, T, EXPS)                                                       \
+static inline __attribute__((always_inline)) void NAME(T *y, const T *const *W, int64_t lanes, int64_t np, \
+                                                   int64_t n, T slope) {                       \
     T acc[lanes * np];                                                                         \
     for (int64_t k = 0; k < lanes; ++k) {                                                      \
         const T *yk = y + k * np, *Wk = W[k];                                                  \
         T *ak = acc + k * np;                                                                  \
         for (int64_t j = 0; j < np; ++j) ak[j] = 0;                                            \
-        for (int64_t i = 0; i < n; ++i)                                                        \
+        /* vectorised over j: each ak[j] still sums over i ascending */                        \
+        for (int64_t i = 0; i < n; ++i) {                                                      \
+            _Pragma("omp simd")                                                                \
             for (int64_t j = 0; j < np; ++j) ak[j] += yk[i] * Wk[i * np + j];                  \
+        }                                                                                      \
     }                                                                                          \
-    for (int64_t j = 0; j < lanes * np; ++j) y[j] = (T)1 / ((T)1 + EXP(-(slope * acc[j])));    \
+    T e[lanes * np];                                                                           \
+    for (int64_t j = 0; j < lanes * np; ++j) acc[j] = -(slope * acc[j]);                       \
+    EXPS(acc, e, lanes * np);                                                                  \
+    for (int64_t j = 0; j < lanes * np; ++j) y[j] = (T)1 / ((T)1 + e[j]);                      \
 }
-DEFINE_SIG_UPDATE(sig_update_f32, float, expf)
-DEFINE_SIG_UPDATE(sig_update_f64, double, exp)
+DEFINE_SIG_UPDATE(sig_update_f32, float, expf_many)
+DEFINE_SIG_UPDATE(sig_update_f64, double, exp_many)
 
 #define DEFINE_SIG_LOOP(NAME, UPDATE, PLANT, T)                                                \
 /* inputs: state variables obs[k] scaled by lim[k] to [0, 1]; bang: F = +-10 N on y > 0.5 */   \
@@ -276,11 +335,15 @@ void NAME(const T *w, const T *state0, int64_t *steps, int64_t *status, int64_t 
                     for (int64_t j = n_in; j < first_out; ++j) yk[j] = 1;                      \
                 }                                                                              \
             }                                                                                  \
+            T sn[LANES], cs[LANES];                                                            \
+            for (int k = 0; k < active; ++k) { sn[k] = sin(s[k][2]); cs[k] = cos(s[k][2]); }   \
             for (int k = 0; k < active; ++k) {                                                 \
-                int64_t r = row[k];                                                            \
                 T out = y[k * np + first_out];                                                 \
                 T force = bang ? (out > (T)0.5 ? (T)10.0 : (T)-10.0) : (T)10.0 * ((T)2.0 * out - (T)1.0); \
-                PLANT(s[k], force, tau, g, total, mp, mpl, l);                                 \
+                PLANT##_trig(s[k], force, sn[k], cs[k], tau, g, total, mp, mpl, l);            \
+            }                                                                                  \
+            for (int k = 0; k < active; ++k) {                                                 \
+                int64_t r = row[k];                                                            \
                 END_STEP(T, k, r)                                                              \
             }                                                                                  \
         }                                                                                      \

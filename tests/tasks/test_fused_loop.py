@@ -184,3 +184,31 @@ def test_markov_row_result_does_not_depend_on_batch_or_lane():
     assert torch.equal(steps(g.gather(reverse)), all_steps.flip(0))
     for i in (0, 5, B - 1):
         assert steps(g.gather(torch.tensor([[i]]))).item() == all_steps[i].item()
+
+
+def test_vectorised_expf_equals_the_c_library():
+    """The sigmoid kernel's vectorised expf repeats glibc's algorithm; checked here against the
+    C library's expf on a sample of every float bit pattern plus the edge cases."""
+    import ctypes
+    import platform
+
+    import tasks.fused_loop as fl
+
+    assert fl.loop_available()
+    fn = fl._lib.expf_many_check
+    fn.restype = None
+    fn.argtypes = [ctypes.c_void_p] * 3 + [ctypes.c_int64]
+    bits = torch.arange(0, 2**32, 4099, dtype=torch.int64)
+    bits = torch.where(bits >= 2**31, bits - 2**32, bits).to(torch.int32)
+    edge = torch.tensor([float.fromhex("0x1.04845ep+5"), float.fromhex("-0x1.f8cbb2p+5"), 88.0, -88.0, 87.99, -87.99, 0.0, -0.0, 1e-40,
+                         float("inf"), float("-inf"), float("nan"), 100.0, -104.0, -110.0])
+    x = torch.cat([bits.view(torch.float32), edge]).contiguous()
+    ours, libm = torch.empty_like(x), torch.empty_like(x)
+    fn(x.data_ptr(), ours.data_ptr(), libm.data_ptr(), x.numel())
+    same = ours.view(torch.int32) == libm.view(torch.int32)
+    if platform.libc_ver() == ("glibc", "2.36"):  # the version it was checked against, every float
+        assert bool(same.all()), x[~same][:5]
+    else:  # another C library may round a few values the other way: at most 1 ulp apart
+        finite = torch.isfinite(libm)
+        assert bool((ours[~finite].view(torch.int32) == libm[~finite].view(torch.int32)).all())
+        assert bool(((ours[finite].view(torch.int32) - libm[finite].view(torch.int32)).abs() <= 1).all())
