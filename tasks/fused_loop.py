@@ -370,20 +370,32 @@ void NAME(const T *w, const T *wout, const T *rest, const uint64_t *keys, const 
         T vv[LANES * MAXN], uu[LANES * MAXN], zz[LANES * MAXN], I[LANES * MAXN];              \
         T cnt[LANES * MAXN], hist[LANES * 16 * MAXN], p[LANES][8];                             \
         uint64_t counter[LANES];                                                               \
+        const int64_t draws = substeps * n_in; /* input spikes per control step */             \
+        T *spikes = (T *)malloc(LANES * draws * sizeof(T));                                    \
+        double *prob = (double *)malloc(draws * sizeof(double));                               \
         LANES_INIT(T)                                                                          \
         for (int64_t j = 0; j < LANES * np; ++j) I[j] = ibg;                                   \
         for (int k = 0; k < LANES; ++k) { SPIKING_START(T) counter[k] = 0; }                   \
         for (;;) {                                                                             \
             FILL_LANES(T, (SPIKING_START(T) counter[k] = 0;), (SPIKING_MOVE counter[k] = counter[src];)) \
             if (active == 0) break;                                                            \
+            /* This control step's input spikes, all drawn up front: draw q * n_in + i of a lane \
+               is input i in substep q, from the same counter as one draw at a time, so the    \
+               counter-based draws vectorise over the step. */                                 \
             for (int k = 0; k < active; ++k) {                                                 \
                 for (int64_t q = 0; q < n_in; ++q) p[k][q] = NORM(T, s[k][obs[q]], lim[q]) * pmax; \
-                for (int64_t j = k * np; j < (k + 1) * np; ++j) cnt[j] = 0;                   \
+                for (int64_t j = k * np; j < (k + 1) * np; ++j) cnt[j] = 0;                    \
+                for (int64_t m = 0; m < draws; m += n_in)                                      \
+                    for (int64_t i = 0; i < n_in; ++i) prob[m + i] = (double)p[k][i];          \
+                const uint64_t key = keys[row[k]], c0 = counter[k];                            \
+                T *sk = spikes + k * draws;                                                    \
+                for (int64_t m = 0; m < draws; ++m) sk[m] = uniform01(key, c0 + m) < prob[m] ? (T)1 : (T)0; \
+                counter[k] += draws;                                                           \
             }                                                                                  \
             for (int64_t q = 0; q < substeps; ++q) {                                           \
                 for (int k = 0; k < active; ++k) {                                             \
                     for (int64_t i = 0; i < n_in; ++i) {                                       \
-                        T z = uniform01(keys[row[k]], counter[k]++) < (double)p[k][i] ? (T)1 : (T)0; \
+                        T z = spikes[k * draws + q * n_in + i];                                \
                         zz[k * np + i] = z;                                                    \
                         cnt[k * np + i] += z;                                                  \
                     }                                                                          \
@@ -404,7 +416,7 @@ void NAME(const T *w, const T *wout, const T *rest, const uint64_t *keys, const 
                 END_STEP(T, k, r)                                                              \
             }                                                                                  \
         }                                                                                      \
-        free(wbuf);                                                                            \
+        free(wbuf); free(spikes); free(prob);                                                  \
     }                                                                                          \
 }
 DEFINE_MARKOV_LOOP(markov_loop_f32, izh_f32_lanes, plant_f32, float, f32)
