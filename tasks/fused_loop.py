@@ -83,8 +83,8 @@ static inline int64_t padded_size(int64_t n) {
 /* LANE_WIDTHS(CALL): CALL with a constant L_, the active lanes rounded up to 1, 2, 4 or 8;
    the lanes past `active` hold stale, finite numbers that nothing reads. */
 #define LANE_CASE(K, CALL) case K: { enum { L_ = K }; CALL; break; }
-#define LANE_WIDTHS(CALL) switch (active > 4 ? 8 : active > 2 ? 4 : active) {                  \
-    LANE_CASE(1, CALL) LANE_CASE(2, CALL) LANE_CASE(4, CALL) LANE_CASE(8, CALL) }
+#define LANE_WIDTHS(CALL) switch (active > 4 ? LANES : active > 2 ? 4 : active) {              \
+    LANE_CASE(1, CALL) LANE_CASE(2, CALL) LANE_CASE(4, CALL) LANE_CASE(LANES, CALL) }
 
 /* Rate decoding over the window of the last `window` control steps (hist[k * np + j]: spikes
    of node j in slot k), summed in slot order as the torch reference does. */
@@ -116,6 +116,7 @@ DEFINE_DECODE(f64, double)
    ends takes the next row at once. Every lane's arithmetic is its network's alone, in the
    reference's order, so a row's result does not depend on its lane or its neighbours. */
 #define LANES 8
+_Static_assert(LANES > 4, "LANE_WIDTHS rounds 5 or more active lanes up to LANES");
 static inline int64_t next_row(int64_t *next, int64_t rows) {
     int64_t r;
     _Pragma("omp atomic capture")
