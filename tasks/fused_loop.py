@@ -186,6 +186,18 @@ static inline int64_t next_row(int64_t *next, int64_t rows) {
 #define SPIKING_MOVE                                                                           \
     COPY_LANE(vv, np, np); COPY_LANE(uu, np, np); COPY_LANE(zz, np, np); COPY_LANE(hist, 16 * np, 16 * np);
 
+/* One substep of every active spiking lane; neurons below FIRST are driven from outside.
+   A macro, not a function, so the lane width L_ and size N_ reach LSUB as constants. */
+#define SPIKING_SUBSTEP(LSUB, T, FIRST)                                                        \
+    LANE_WIDTHS(SIZED(LSUB(vv, uu, zz, (const T *const *)W, I, cnt, L_, N_, FIRST, n, dt, a, b, c, d, vpeak), \
+                      LSUB(vv, uu, zz, (const T *const *)W, I, cnt, L_, np, FIRST, n, dt, a, b, c, d, vpeak)))
+/* Lane k's spike counts of this control step into its rate window (hk: the window, denom:
+   the window's length so far in s, as the torch reference divides). */
+#define RATE_WINDOW(T, k, hk, denom)                                                           \
+    T *hk = hist + k * 16 * np;                                                                \
+    for (int64_t j = 0; j < np; ++j) hk[(t[k] % window) * np + j] = cnt[k * np + j];           \
+    T denom = (T)((double)(t[k] + 1 < window ? t[k] + 1 : window) * (double)window_s);
+
 /* status[r]: 0 ok, 1 the plant produced NaN or inf. */
 #define DEFINE_SNN_LOOP(NAME, LSUB, PLANT, T, EXP, SUFFIX)                                     \
 void NAME(const T *w, const T *wout, const T *sigma, const T *state0, int64_t *steps,         \
@@ -209,15 +221,11 @@ void NAME(const T *w, const T *wout, const T *sigma, const T *state0, int64_t *s
                 Ik[0] = ibg + imax * xn; Ik[1] = ibg + imax * thn;                             \
             }                                                                                  \
             for (int64_t q = 0; q < substeps; ++q) {                                           \
-                LANE_WIDTHS(SIZED(LSUB(vv, uu, zz, (const T *const *)W, I, cnt, L_, N_, 0, n, dt, a, b, c, d, vpeak), \
-                                  LSUB(vv, uu, zz, (const T *const *)W, I, cnt, L_, np, 0, n, dt, a, b, c, d, vpeak))) \
+                SPIKING_SUBSTEP(LSUB, T, 0)                                                    \
             }                                                                                  \
             for (int k = 0; k < active; ++k) {                                                 \
                 int64_t r = row[k];                                                            \
-                T *hk = hist + k * 16 * np, *slot = hk + (t[k] % window) * np;                 \
-                for (int64_t j = 0; j < np; ++j) slot[j] = cnt[k * np + j];                    \
-                int64_t in_window = t[k] + 1 < window ? t[k] + 1 : window;                     \
-                T denom = (T)((double)in_window * (double)window_s);                           \
+                RATE_WINDOW(T, k, hk, denom)                                                   \
                 T drive = weighted_rate_##SUFFIX(hk, window, n, np, denom, wout + r * n, 0);   \
                 T fn = (T)1 / ((T)1 + EXP(-(sigma[r] * drive)));                               \
                 T force = (T)10.0 * ((T)2.0 * fn - (T)1.0);                                    \
@@ -322,6 +330,7 @@ void NAME(const T *w, const T *state0, int64_t *steps, int64_t *status, int64_t 
             if (active == 0) break;                                                            \
             for (int k = 0; k < active; ++k)                                                   \
                 for (int64_t q = 0; q < n_in; ++q) in[k][q] = NORM(T, s[k][obs[q]], lim[q]);   \
+            /* inputs and bias are set before every update: nothing reads them after it */     \
             for (int64_t q = 0; q < updates; ++q) {                                            \
                 for (int k = 0; k < active; ++k) {                                             \
                     T *yk = y + k * np;                                                        \
@@ -330,11 +339,6 @@ void NAME(const T *w, const T *state0, int64_t *steps, int64_t *status, int64_t 
                 }                                                                              \
                 LANE_WIDTHS(SIZED(UPDATE(y, (const T *const *)W, L_, N_, n, slope),            \
                                   UPDATE(y, (const T *const *)W, L_, np, n, slope)))           \
-                for (int k = 0; k < active; ++k) {                                             \
-                    T *yk = y + k * np;                                                        \
-                    for (int64_t j = 0; j < n_in; ++j) yk[j] = in[k][j];                       \
-                    for (int64_t j = n_in; j < first_out; ++j) yk[j] = 1;                      \
-                }                                                                              \
             }                                                                                  \
             T sn[LANES], cs[LANES];                                                            \
             for (int k = 0; k < active; ++k) { sn[k] = sin(s[k][2]); cs[k] = cos(s[k][2]); }   \
@@ -369,7 +373,7 @@ void NAME(const T *w, const T *wout, const T *rest, const uint64_t *keys, const 
     _Pragma("omp parallel num_threads(threads)")                                               \
     {                                                                                          \
         T vv[LANES * MAXN], uu[LANES * MAXN], zz[LANES * MAXN], I[LANES * MAXN];              \
-        T cnt[LANES * MAXN], hist[LANES * 16 * MAXN], p[LANES][8];                             \
+        T cnt[LANES * MAXN], hist[LANES * 16 * MAXN];                                          \
         uint64_t counter[LANES];                                                               \
         const int64_t draws = substeps * n_in; /* input spikes per control step */             \
         T *spikes = (T *)malloc(LANES * draws * sizeof(T));                                    \
@@ -384,10 +388,11 @@ void NAME(const T *w, const T *wout, const T *rest, const uint64_t *keys, const 
                is input i in substep q, from the same counter as one draw at a time, so the    \
                counter-based draws vectorise over the step. */                                 \
             for (int k = 0; k < active; ++k) {                                                 \
-                for (int64_t q = 0; q < n_in; ++q) p[k][q] = NORM(T, s[k][obs[q]], lim[q]) * pmax; \
+                T pk[8];                                                                       \
+                for (int64_t q = 0; q < n_in; ++q) pk[q] = NORM(T, s[k][obs[q]], lim[q]) * pmax; \
                 for (int64_t j = k * np; j < (k + 1) * np; ++j) cnt[j] = 0;                    \
                 for (int64_t m = 0; m < draws; m += n_in)                                      \
-                    for (int64_t i = 0; i < n_in; ++i) prob[m + i] = (double)p[k][i];          \
+                    for (int64_t i = 0; i < n_in; ++i) prob[m + i] = (double)pk[i];            \
                 const uint64_t key = keys[row[k]], c0 = counter[k];                            \
                 T *sk = spikes + k * draws;                                                    \
                 for (int64_t m = 0; m < draws; ++m) sk[m] = uniform01(key, c0 + m) < prob[m] ? (T)1 : (T)0; \
@@ -401,15 +406,11 @@ void NAME(const T *w, const T *wout, const T *rest, const uint64_t *keys, const 
                         cnt[k * np + i] += z;                                                  \
                     }                                                                          \
                 }                                                                              \
-                LANE_WIDTHS(SIZED(LSUB(vv, uu, zz, (const T *const *)W, I, cnt, L_, N_, n_in, n, dt, a, b, c, d, vpeak), \
-                                  LSUB(vv, uu, zz, (const T *const *)W, I, cnt, L_, np, n_in, n, dt, a, b, c, d, vpeak))) \
+                SPIKING_SUBSTEP(LSUB, T, n_in)                                                 \
             }                                                                                  \
             for (int k = 0; k < active; ++k) {                                                 \
                 int64_t r = row[k];                                                            \
-                T *hk = hist + k * 16 * np, *slot = hk + (t[k] % window) * np;                 \
-                for (int64_t j = 0; j < np; ++j) slot[j] = cnt[k * np + j];                    \
-                int64_t in_window = t[k] + 1 < window ? t[k] + 1 : window;                     \
-                T denom = (T)((double)in_window * (double)window_s);                           \
+                RATE_WINDOW(T, k, hk, denom)                                                   \
                 T drive = wout ? weighted_rate_##SUFFIX(hk, window, n, np, denom, wout + r * n, rest) \
                                : window_rate_##SUFFIX(hk, window, np, out, denom);             \
                 T force = drive > thr_hz ? (T)10.0 : (T)-10.0;                                 \
