@@ -15,7 +15,8 @@ __all__ = ["CheckpointError", "atomic_write_bytes", "atomic_torch_save", "load_c
            "CHECKPOINT_FORMAT", "CHECKPOINT_VERSION"]
 
 CHECKPOINT_FORMAT = "snn-neat-checkpoint"
-CHECKPOINT_VERSION = 1
+# 2: counter-based GA streams (``RunRNG`` offsets); version 1 held mt19937 generator states.
+CHECKPOINT_VERSION = 2
 # File layout: MAGIC, the SHA-256 of the payload (32 bytes), the payload (torch.save bytes).
 # torch.load does not notice flipped bytes inside tensor data; the digest does.
 MAGIC = b"SNN-NEAT-CKPT\n"
@@ -76,5 +77,7 @@ def load_checkpoint_dict(path: str | os.PathLike, *, map_location: str | torch.d
         raise CheckpointError(f"{name!r} is not an snn-neat checkpoint")
     if data.get("version") != CHECKPOINT_VERSION:
         raise CheckpointError(f"checkpoint {name!r} has version {data.get('version')!r}; "
-                              f"this snn-neat reads version {CHECKPOINT_VERSION}")
+                              f"this snn-neat reads version {CHECKPOINT_VERSION} (version 1 checkpoints hold mt19937 "
+                              "streams, which this version no longer draws; resume them with snn-neat at commit "
+                              "509348d, the last before the counter-based streams)")
     return data

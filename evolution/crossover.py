@@ -27,11 +27,11 @@ def crossover(fit: Genomes, other: Genomes, cfg: NEATConfig, rng: RunRNG, active
     """
     P, N = fit.pop_size, fit.num_nodes
     matching = fit.conn & other.conn
-    from_other = matching & (rng.rand(P, N, N) < 0.5)
+    from_other = matching & (rng.rand(P, N, N, dtype=torch.float64) < 0.5)
     weight = torch.where(from_other, other.weight, fit.weight)
     disabled_in_a_parent = fit.conn & (~fit.enabled | (matching & ~other.enabled))
-    stays_disabled = disabled_in_a_parent & (rng.rand(P, N, N) < cfg.disabled_inherit_prob)
+    stays_disabled = disabled_in_a_parent & (rng.rand(P, N, N, dtype=torch.float64) < cfg.disabled_inherit_prob)
     enabled = fit.conn & ~stays_disabled
-    sigma = torch.where(rng.rand(P) < 0.5, other.sigma, fit.sigma)
+    sigma = torch.where(rng.rand(P, dtype=torch.float64) < 0.5, other.sigma, fit.sigma)
     child = Genomes(weight, fit.conn.clone(), enabled, fit.node.clone(), sigma)
     return fit.where(active, child)

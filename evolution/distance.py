@@ -28,8 +28,8 @@ __all__ = ["GeneStats", "gene_stats", "distance", "distance_matrix"]
 
 @dataclass
 class GeneStats:
-    """Per-genome gene vectors and summaries, ``[R, K, ...]``, in the weights' dtype
-    (gene counts are small integers, exact in float32)."""
+    """Per-genome gene vectors and summaries, ``[R, K, ...]``, in float64 whatever the
+    weights' dtype, so the distances match the fused kernel's (which sums in double)."""
 
     has: Tensor  # [R, K, G] 1.0 where the gene exists
     w: Tensor  # [R, K, G] weight (0 where no gene)
@@ -57,12 +57,12 @@ class GeneStats:
 
 def gene_stats(conn: Tensor, weight: Tensor, sigma: Tensor) -> GeneStats:
     """Statistics of genomes ``conn/weight [R, K, N, N]``, ``sigma [R, K]``."""
-    has = conn.flatten(2).to(weight.dtype)
-    w = torch.where(conn, weight, 0.0).flatten(2)
+    has = conn.flatten(2).to(torch.float64)
+    w = torch.where(conn, weight, 0.0).flatten(2).to(torch.float64)
     absw = w.abs()
     G = has.shape[-1]
     top = torch.where(conn.flatten(2), torch.arange(G, device=has.device), -1).amax(-1)
-    return GeneStats(has, w, absw, has.sum(-1), absw.sum(-1), top, has.cumsum(-1), sigma.to(weight.dtype))
+    return GeneStats(has, w, absw, has.sum(-1), absw.sum(-1), top, has.cumsum(-1), sigma.to(torch.float64))
 
 
 def _genes_upto(upto: Tensor, top: Tensor) -> Tensor:

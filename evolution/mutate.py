@@ -2,6 +2,10 @@
 
 Every function is pure: genomes in, new genomes out, random numbers from the per-run
 ``RunRNG``. ``active[R, P]`` marks the genomes that may mutate (elites are copied unchanged).
+Decisions compare float64 uniforms with the configured probabilities. Every block of draws
+covers every genome and slot, used or not, so a run's stream never depends on what happened
+elsewhere; ``evolution.breed_kernel`` computes the same step, evaluating only the draws a
+genome uses (a draw is addressed by its counter).
 """
 
 from __future__ import annotations
@@ -37,8 +41,8 @@ def mutate_weights(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> 
     unchanged. Both draw the same random numbers, so neither shifts the other streams.
     """
     P, N = g.pop_size, g.num_nodes
-    genome_u = rng.rand(P)  # drawn in both modes, so the streams stay aligned
-    u = rng.rand(P, N, N)
+    genome_u = rng.rand(P, dtype=torch.float64)  # drawn in both modes, so the streams stay aligned
+    u = rng.rand(P, N, N, dtype=torch.float64)
     noise = rng.randn(P, N, N, dtype=g.weight.dtype)
     if cfg.weight_mutate_per_gene:
         perturb = u < cfg.weight_mutate_rate
@@ -57,7 +61,7 @@ def mutate_weights(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> 
 def mutate_sigma(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> Genomes:
     """Perturb the decoder gain by N(0, sigma_mutate_power^2), kept in its bounds."""
     P = g.pop_size
-    hit = active & (rng.rand(P) < cfg.sigma_mutate_rate)
+    hit = active & (rng.rand(P, dtype=torch.float64) < cfg.sigma_mutate_rate)
     new = (g.sigma + cfg.sigma_mutate_power * rng.randn(P, dtype=g.sigma.dtype))
     new = new.clamp(cfg.sigma_min_value, cfg.sigma_max_value)
     return Genomes(g.weight, g.conn, g.enabled, g.node, torch.where(hit, new, g.sigma))
@@ -66,7 +70,7 @@ def mutate_sigma(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> Ge
 def mutate_toggle_enabled(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> Genomes:
     """Flip each gene's enabled flag with ``enabled_mutate_rate``."""
     P, N = g.pop_size, g.num_nodes
-    flip = _bcast(active, g.conn) & g.conn & (rng.rand(P, N, N) < cfg.enabled_mutate_rate)
+    flip = _bcast(active, g.conn) & g.conn & (rng.rand(P, N, N, dtype=torch.float64) < cfg.enabled_mutate_rate)
     return Genomes(g.weight, g.conn, g.enabled ^ flip, g.node, g.sigma)
 
 
@@ -87,12 +91,16 @@ def _flat(t: Tensor) -> Tensor:
     return t.flatten(0, 1)
 
 
-def _pick_for(mask: Tensor, scores: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-    """For a subset of genomes: a uniformly random True slot (i, j)
-    of ``mask[K, N, N]`` (the rows' masks), using ``scores`` (the rows' uniform draws)."""
+def _pick_for(mask: Tensor, u: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    """For a subset of genomes: a uniformly random True slot (i, j) of ``mask[K, N, N]``,
+    the ``floor(u n)``-th of its ``n`` True slots in flat order, ``u[K]`` float64 uniforms.
+    Returns ``(i, j, possible)``."""
     N = mask.shape[-1]
-    flat = torch.where(mask, scores, -1.0).flatten(1).argmax(-1)
-    return flat // N, flat % N, mask.flatten(1).any(-1)
+    flat = mask.flatten(1)
+    n = flat.sum(1)
+    k = (u * n.to(torch.float64)).long().clamp_max(n - 1).clamp_min(0)
+    slot = torch.searchsorted(flat.long().cumsum(1), (k + 1).unsqueeze(1)).squeeze(1).clamp_max(N * N - 1)
+    return slot // N, slot % N, n > 0
 
 
 def mutate_add_connection(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> Genomes:
@@ -101,16 +109,16 @@ def mutate_add_connection(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tens
     Candidates are computed only for the genomes that mutate (random numbers are still
     drawn for all, so every run's stream is the same whatever happens elsewhere).
     """
-    P, N = g.pop_size, g.num_nodes
-    want = active & (rng.rand(P) < cfg.conn_add_prob)
-    scores = rng.rand(P, N, N)
+    P = g.pop_size
+    want = active & (rng.rand(P, dtype=torch.float64) < cfg.conn_add_prob)
+    pick = rng.rand(P, dtype=torch.float64)
     init = cfg.weight_init_mean + cfg.weight_init_stdev * rng.randn(P, dtype=g.weight.dtype)
     init = init.clamp(cfg.weight_min_value, cfg.weight_max_value)
     rows = torch.nonzero(_flat(want)).squeeze(1)
     if rows.numel() == 0:
         return g
     sub = Genomes(**{k: _flat(t)[rows].unsqueeze(0) for k, t in g.tensors().items()})
-    src, dst, possible = _pick_for(add_connection_candidates(sub, cfg)[0], _flat(scores)[rows])
+    src, dst, possible = _pick_for(add_connection_candidates(sub, cfg)[0], _flat(pick)[rows])
     rows, src, dst = rows[possible], src[possible], dst[possible]
     weight, conn, enabled = g.weight.clone(), g.conn.clone(), g.enabled.clone()
     _flat(weight)[rows, src, dst] = _flat(init)[rows]
@@ -129,15 +137,15 @@ def mutate_add_node(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor,
     representatives). Returns the genomes and ``[R, P]`` bool: splits refused for want
     of a free slot.
     """
-    R, P, N = g.num_runs, g.pop_size, g.num_nodes
-    want = active & (rng.rand(P) < cfg.node_add_prob)
-    scores = rng.rand(P, N, N)
+    R, P = g.num_runs, g.pop_size
+    want = active & (rng.rand(P, dtype=torch.float64) < cfg.node_add_prob)
+    pick = rng.rand(P, dtype=torch.float64)
     src = torch.zeros(R * P, dtype=torch.long, device=g.device)
     dst = torch.zeros_like(src)
     possible = torch.zeros(R * P, dtype=torch.bool, device=g.device)
     rows = torch.nonzero(_flat(want)).squeeze(1)
     if rows.numel():
-        src[rows], dst[rows], possible[rows] = _pick_for(_flat(g.enabled)[rows], _flat(scores)[rows])
+        src[rows], dst[rows], possible[rows] = _pick_for(_flat(g.enabled)[rows], _flat(pick)[rows])
     request = want & possible.view(R, P)
     used = g.node.any(1)
     if reserved is not None:

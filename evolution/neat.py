@@ -63,6 +63,9 @@ class NEAT:
     """
 
     reproduce_chunk_genomes: int = 12_000
+    #: Breed and speciate with the C kernels (True), the tensor operators (False), or the
+    #: kernels wherever they can run (None). The same result either way (tested).
+    fused_breeding: bool | None = None
 
     def __init__(self, config: NEATConfig, *, seeds: Iterable[int] = (0,), device: str | torch.device = "cpu",
                  dtype: torch.dtype = torch.float32) -> None:
@@ -181,7 +184,8 @@ class NEAT:
         rng = self.rng if all_runs else self.rng.subset(evolving)
         g = self.genomes if all_runs else self.genomes.select_runs(sub[0])
         sp = self.species_state if all_runs else self.species_state.select_runs(sub[0])
-        children, _elite, sp, info = reproduce(g, fitness[sub], self.species[sub], sp, cfg, rng, self.generation)
+        children, _elite, sp, info = reproduce(g, fitness[sub], self.species[sub], sp, cfg, rng, self.generation,
+                                               fused=self.fused_breeding)
         if bool(info.extinct.any()):
             gone = torch.nonzero(info.extinct).flatten().tolist()
             fresh = initial_genomes(cfg, rng.subset(gone), dtype=self.dtype)
@@ -190,7 +194,7 @@ class NEAT:
                 t[idx] = getattr(fresh, name)
             sp.alive[idx] = False
             self._report("complete_extinction", [evolving[i] for i in gone])
-        species, sp = speciate(children, sp, cfg, rng, self.generation + 1)
+        species, sp = speciate(children, sp, cfg, rng, self.generation + 1, fused=self.fused_breeding)
         if all_runs:
             self.genomes, self.species, self.species_state = children, species, sp
         else:

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from evolution import breed_kernel
 from evolution.config import NEATConfig
 from evolution.crossover import crossover
 from evolution.mutate import (
@@ -90,12 +91,14 @@ def allocate_offspring(fitness: Tensor, species: Tensor, survivors: Tensor, pop_
 
 
 def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cfg: NEATConfig,
-              rng: RunRNG, generation: int) -> tuple[Genomes, Tensor, SpeciesState, ReproductionInfo]:
+              rng: RunRNG, generation: int, *, fused: bool | None = None
+              ) -> tuple[Genomes, Tensor, SpeciesState, ReproductionInfo]:
     """The next generation (before speciation).
 
     Returns ``(children, elite [R, P] bool, species state, info)``. Runs whose species all
     went extinct get ``info.extinct``; their children are meaningless and the caller resets
-    them.
+    them. ``fused``: breed with the C kernel (``evolution.breed_kernel``, same result) or the
+    tensor operators; by default the kernel wherever it can run (CPU, compiler present).
     """
     R, P = fitness.shape
     dev = fitness.device
@@ -138,24 +141,25 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
     n_all = cum[:, -1:].clamp_min(1)
     pick = (rng.rand(P, dtype=torch.float64) * n_all).long().clamp_max(n_all - 1)
     any_parent = torch.gather(order, 1, torch.searchsorted(cum, pick, right=True).clamp_max(P - 1))
-    inter = rng.rand(P) < cfg.interspecies_crossover_prob
+    inter = rng.rand(P, dtype=torch.float64) < cfg.interspecies_crossover_prob
     p2 = torch.where(inter, any_parent, p2)
 
-    do_cross = ~elite & (rng.rand(P) < cfg.crossover_prob) & (p1 != p2)
+    do_cross = ~elite & (rng.rand(P, dtype=torch.float64) < cfg.crossover_prob) & (p1 != p2)
     f1, f2 = torch.gather(fitness, 1, p1), torch.gather(fitness, 1, p2)
     fitter = torch.where(f2 > f1, p2, p1)
     other = torch.where(f2 > f1, p1, p2)
-    first = g.gather(torch.where(do_cross, fitter, p1))
-    second = g.gather(torch.where(do_cross, other, p1))
-    children = crossover(first, second, cfg, rng, do_cross)
-
+    first, second = torch.where(do_cross, fitter, p1), torch.where(do_cross, other, p1)
     active = ~elite
     reserved = _rep_nodes(sp)
-    children, refused = mutate_add_node(children, cfg, rng, active, reserved=reserved)
-    children = mutate_add_connection(children, cfg, rng, active)
-    children = mutate_weights(children, cfg, rng, active)
-    children = mutate_sigma(children, cfg, rng, active)
-    children = mutate_toggle_enabled(children, cfg, rng, active)
+    if breed_kernel.usable_for(g) if fused is None else fused:
+        children, refused = breed_kernel.breed(g, first, second, do_cross, active, cfg, rng, reserved)
+    else:
+        children = crossover(g.gather(first), g.gather(second), cfg, rng, do_cross)
+        children, refused = mutate_add_node(children, cfg, rng, active, reserved=reserved)
+        children = mutate_add_connection(children, cfg, rng, active)
+        children = mutate_weights(children, cfg, rng, active)
+        children = mutate_sigma(children, cfg, rng, active)
+        children = mutate_toggle_enabled(children, cfg, rng, active)
 
     info = ReproductionInfo(
         extinct=~survivors.any(1),
@@ -168,5 +172,9 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
 
 def _rep_nodes(sp: SpeciesState) -> Tensor:
     """Node slots touched by any living representative's genes, ``[R, N]``."""
-    genes = sp.rep_conn & sp.alive.view(*sp.alive.shape, 1, 1)
-    return (genes.any(-1) | genes.any(-2)).any(1)
+    R, S, N = sp.rep_conn.shape[:3]
+    live = torch.nonzero(sp.alive.flatten()).squeeze(1)
+    genes = sp.rep_conn.flatten(0, 1)[live]  # living representatives only
+    touched = (genes.any(-1) | genes.any(-2)).to(torch.int32)
+    used = torch.zeros(R, N, dtype=torch.int32, device=genes.device).index_add_(0, live // S, touched)
+    return used > 0

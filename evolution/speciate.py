@@ -14,6 +14,7 @@ from dataclasses import dataclass, fields
 import torch
 from torch import Tensor
 
+from evolution import breed_kernel
 from evolution.config import NEATConfig
 from evolution.distance import distance, gene_stats
 from evolution.population import Genomes
@@ -87,8 +88,10 @@ def _free_slot(species: Tensor, sp: SpeciesState, need: Tensor) -> tuple[Tensor,
     """The lowest species slot per run holding no species with members this generation
     and not founded this generation; grows the slots when a run in ``need`` has none."""
     while True:
-        taken = torch.zeros_like(sp.alive)
-        taken.scatter_(1, species.clamp_min(0), species >= 0)
+        # Counted, not scattered: a scatter of flags would let an unassigned genome's False
+        # (its -1 clamped to slot 0) overwrite a member's True, and reuse slot 0 while taken.
+        members = torch.zeros(sp.alive.shape, dtype=torch.long, device=species.device)
+        taken = members.scatter_add_(1, species.clamp_min(0), (species >= 0).long()) > 0
         slot, has_slot = _first_true(~taken)
         if not bool((need & ~has_slot).any()):
             return slot, sp
@@ -103,13 +106,57 @@ def _first_true(mask: Tensor) -> tuple[Tensor, Tensor]:
     return first.clamp_max(n - 1), first < n
 
 
-def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generation: int) -> tuple[Tensor, SpeciesState]:
-    """Assign every genome a species slot; returns ``(species [R, P] long, new state)``."""
+def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generation: int, *,
+             fused: bool | None = None) -> tuple[Tensor, SpeciesState]:
+    """Assign every genome a species slot; returns ``(species [R, P] long, new state)``.
+
+    ``fused``: assign by the C kernel (``evolution.breed_kernel.assign_species``, the same
+    rule; distances agree to about 1e-15) or by the tensor reference below; by default the
+    kernel wherever it can run."""
+    R, P = g.num_runs, g.pop_size
+    dev = g.device
+    runs = torch.arange(R, device=dev)
+    # Pure: never edit the input (the representatives are only read, so they are not copied).
+    sp = SpeciesState(**{k: v if k.startswith("rep_") else v.clone() for k, v in sp.tensors().items()})
+    if breed_kernel.usable_for(g) if fused is None else fused:
+        species, sp = _assign_by_kernel(g, sp, cfg, generation)
+    else:
+        species, sp = _assign_by_tensors(g, sp, cfg, generation)
+    # Species without members die; each survivor takes a random member as representative.
+    counts = torch.zeros(R, sp.capacity, dtype=torch.long, device=dev)
+    counts.scatter_add_(1, species, torch.ones_like(species))
+    alive = counts > 0
+    score = rng.rand(P, dtype=torch.float64)
+    best_score = torch.full((R, sp.capacity), -1.0, dtype=torch.float64, device=dev).scatter_reduce(1, species, score, "amax")
+    is_rep = score == torch.gather(best_score, 1, species)
+    rep_index = _scatter_index(species, is_rep, sp.capacity)
+    # The representatives: whole genome rows copied at once; slots without a species emptied.
+    S = sp.capacity
+    flat = (rep_index + runs.unsqueeze(1) * P).flatten()
+    reps = {k: v.flatten(0, 1).index_select(0, flat) for k, v in g.tensors().items()}
+    dead = torch.nonzero(~alive.flatten()).squeeze(1)
+    for k in ("conn", "weight", "sigma"):
+        reps[k][dead] = 0
+    new = SpeciesState(
+        alive=alive,
+        rep_conn=reps["conn"].view(R, S, *g.conn.shape[2:]),
+        rep_weight=reps["weight"].view(R, S, *g.weight.shape[2:]),
+        rep_sigma=reps["sigma"].view(R, S),
+        best_fitness=torch.where(alive, sp.best_fitness, -torch.inf),
+        last_improved=sp.last_improved,
+        created=sp.created,
+        ident=sp.ident,
+        next_id=sp.next_id,
+    )
+    return species, new
+
+
+def _assign_by_tensors(g: Genomes, sp: SpeciesState, cfg: NEATConfig, generation: int) -> tuple[Tensor, SpeciesState]:
+    """The reference assignment; ``sp`` is edited in place (the caller's copy)."""
     R, P = g.num_runs, g.pop_size
     dev = g.device
     thr = cfg.compatibility_threshold
     runs = torch.arange(R, device=dev)
-    sp = SpeciesState(**{k: v.clone() for k, v in sp.tensors().items()})  # pure: never edit the input
     species = torch.full((R, P), -1, dtype=torch.long, device=dev)
     stats = gene_stats(g.conn, g.weight, g.sigma)
     n_alive = int(sp.alive.sum(1).max())
@@ -139,8 +186,8 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
         U = int(n_unassigned.max())
         packed = torch.argsort((~unassigned[need]).to(torch.int8), dim=1, stable=True)[:, :U]  # genome indices
         valid = torch.arange(U, device=dev) < n_unassigned.unsqueeze(1)
-        ustats = stats.select(need, packed)
         k = min(k_max, U)
+        ustats = stats.select(need, packed)
         d_cand = distance(ustats, ustats.take(torch.arange(k, device=dev).expand(need.numel(), k)), cfg)
         for c in range(k):
             current = species[need.unsqueeze(1), packed]  # [R', U]
@@ -160,28 +207,28 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
             sp.created[s_idx] = torch.where(has, generation, sp.created[s_idx])
             sp.ident[s_idx] = torch.where(has, sp.next_id, sp.ident[s_idx])
             sp.next_id = sp.next_id + has.long()
-    # Species without members die; each survivor takes a random member as representative.
-    counts = torch.zeros(R, sp.capacity, dtype=torch.long, device=dev)
-    counts.scatter_add_(1, species, torch.ones_like(species))
-    alive = counts > 0
-    score = rng.rand(P)
-    best_score = torch.full((R, sp.capacity), -1.0, device=dev).scatter_reduce(1, species, score, "amax")
-    is_rep = score == torch.gather(best_score, 1, species)
-    rep_index = _scatter_index(species, is_rep, sp.capacity)
-    reps = g.gather(rep_index)
-    keep = alive.view(R, -1, 1, 1)
-    new = SpeciesState(
-        alive=alive,
-        rep_conn=torch.where(keep, reps.conn, False),
-        rep_weight=torch.where(keep, reps.weight, 0.0),
-        rep_sigma=torch.where(alive, reps.sigma, 0.0),
-        best_fitness=torch.where(alive, sp.best_fitness, -torch.inf),
-        last_improved=sp.last_improved,
-        created=sp.created,
-        ident=sp.ident,
-        next_id=sp.next_id,
-    )
-    return species, new
+    return species, sp
+
+
+def _assign_by_kernel(g: Genomes, sp: SpeciesState, cfg: NEATConfig, generation: int) -> tuple[Tensor, SpeciesState]:
+    """The same assignment by the C kernel, then the new species' bookkeeping as tensors."""
+    genes = breed_kernel.GeneBits(g.conn, g.weight, g.sigma)
+    reps = breed_kernel.GeneBits(sp.rep_conn, sp.rep_weight, sp.rep_sigma)
+    species, founded, n_founded = breed_kernel.assign_species(genes, reps, sp.alive, cfg)
+    capacity = sp.capacity
+    while capacity <= int(species.max()):  # grown by doubling, as _free_slot grows
+        capacity *= 2
+    if capacity > sp.capacity:
+        sp = sp.grow(capacity)
+    run, k = torch.nonzero(torch.arange(g.pop_size) < n_founded.unsqueeze(1), as_tuple=True)
+    slot = founded[run, k]
+    sp.alive[run, slot] = True
+    sp.best_fitness[run, slot] = -torch.inf
+    sp.last_improved[run, slot] = generation
+    sp.created[run, slot] = generation
+    sp.ident[run, slot] = sp.next_id[run] + k
+    sp.next_id = sp.next_id + n_founded
+    return species, sp
 
 
 def _scatter_index(species: Tensor, is_rep: Tensor, capacity: int) -> Tensor:

@@ -18,13 +18,14 @@ import ctypes
 import torch
 from torch import Tensor
 
+from evolution.rng import COUNTER_RNG_C
 from snn_torch._cbuild import load_c_library
 from snn_torch.functional.fused_cpu import MAX_NODES, ROW_SOURCE
 from tasks.cartpole import CartPoleParams, PlantError
 
 __all__ = ["loop_available", "spiking_loop", "sigmoid_loop", "markov_spiking_loop", "genome_keys"]
 
-_LOOP_SOURCE = r"""
+_LOOP_SOURCE = COUNTER_RNG_C + r"""
 #include <stdlib.h>
 #include <string.h>
 #define DEFINE_PLANT(NAME, T)                                                                  \
@@ -45,16 +46,7 @@ static inline void NAME(T *s, T force, T tau, T g, T total, T mp, T mpl, T l) { 
 DEFINE_PLANT(plant_f32, float)
 DEFINE_PLANT(plant_f64, double)
 
-/* Counter-based random numbers (splitmix64): a row's stream depends on its key alone. */
-static inline uint64_t mix64(uint64_t x) {
-    x += 0x9E3779B97F4A7C15ULL;
-    x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
-    x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
-    return x ^ (x >> 31);
-}
-static inline double uniform01(uint64_t key, uint64_t counter) {
-    return (double)(mix64(key ^ mix64(counter)) >> 11) * 0x1.0p-53;
-}
+/* Counter-based random numbers (splitmix64, COUNTER_RNG_C): a row's stream depends on its key alone. */
 /* FNV-1a over a row's bytes: a key that is a pure function of the genome. */
 void row_keys(const unsigned char *data, int64_t rows, int64_t bytes_per_row, uint64_t *keys) {
     for (int64_t r = 0; r < rows; ++r) {

@@ -1,0 +1,487 @@
+"""The breeding step and the compatibility distances as C kernels (CPU).
+
+The tensor operators (``crossover``, ``mutate_*``, ``distance``) are the readable reference:
+each touches every slot of every genome and draws a random number for every slot. These
+kernels compute the same step one child at a time, touching only the child's genes and
+evaluating only the draws it uses: a draw is addressed by its counter in the run's stream
+(``evolution.rng``), so skipping the unused ones changes nothing. Children are independent,
+so the result is the same with any thread count.
+
+- ``breed``: crossover, add-node (with the run's node registry in between), add-connection,
+  weight, sigma and enabled mutations, in the reference's order and with its arithmetic
+  (no contraction; float32 genomes round where torch rounds), and the same normals
+  (``evolution.rng.box_muller``), so the children are the same bit for bit.
+- ``GeneBits`` / ``gene_distances``: excess, disjoint and weight terms from per-genome gene
+  bitsets (popcounts), summed in double. The reference sums the weight term another way
+  (``L1 - a_only - b_only``), so the two agree to about 1e-15.
+
+``SNN_NEAT_FUSED=0`` disables the kernels (``snn_torch._cbuild``).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import threading
+
+import torch
+from torch import Tensor
+
+from evolution.config import NEATConfig
+from evolution.innovation import assign_split_nodes
+from evolution.population import Genomes
+from evolution.rng import BOX_MULLER_C, COUNTER_RNG_C, RunRNG
+from snn_torch._cbuild import load_c_library
+
+__all__ = ["kernel_available", "usable_for", "breed", "breed_blocks", "GeneBits", "gene_distances", "assign_species"]
+
+# Draw blocks of one breeding step, in the reference's order: (name, draws per genome as a
+# multiple of N^2 and of 1, counters per draw). A block of shape [P, N, N] is "nn".
+_BLOCKS = (
+    ("from_other", "nn", 1), ("stays_disabled", "nn", 1), ("sigma_pick", "p", 1),  # crossover
+    ("node_want", "p", 1), ("node_pick", "p", 1),  # mutate_add_node
+    ("conn_want", "p", 1), ("conn_pick", "p", 1), ("conn_init", "p", 2),  # mutate_add_connection
+    ("w_genome", "p", 1), ("w_u", "nn", 1), ("w_noise", "nn", 2),  # mutate_weights
+    ("s_want", "p", 1), ("s_noise", "p", 2),  # mutate_sigma
+    ("toggle", "nn", 1),  # mutate_toggle_enabled
+)
+
+
+def breed_blocks(P: int, N: int) -> tuple[list[int], int]:
+    """Each block's first counter relative to the step's first, and the step's total."""
+    starts, at = [], 0
+    for _, kind, per in _BLOCKS:
+        starts.append(at)
+        at += (P * N * N if kind == "nn" else P) * per
+    return starts, at
+
+
+_SOURCE = r"""
+#include <stdint.h>
+#include <string.h>
+#include <math.h>
+""" + COUNTER_RNG_C + BOX_MULLER_C + r"""
+static inline double normal_at(uint64_t key, uint64_t c) {
+    return box_muller(uniform01(key, c), uniform01(key, c + 1));
+}
+enum { B_FROM_OTHER, B_STAYS, B_SIGMA_PICK, B_NODE_WANT, B_NODE_PICK, B_CONN_WANT, B_CONN_PICK, B_CONN_INIT,
+       B_W_GENOME, B_W_U, B_W_NOISE, B_S_WANT, B_S_NOISE, B_TOGGLE, N_BLOCKS };
+#define MAX_ROWS 64 /* the feed-forward closure: N <= 64 rows of one 64-bit word */
+
+/* The slots of the set bytes (0/1) of mask[0..n), ascending, eight bytes at a time (genes are
+   sparse); returns how many. */
+static inline int64_t set_slots(const uint8_t *mask, int64_t n, int32_t *out) {
+    int64_t m = 0, s = 0;
+    for (; s + 8 <= n; s += 8) {
+        uint64_t x; memcpy(&x, mask + s, 8);
+        while (x) { out[m++] = (int32_t)(s + (__builtin_ctzll(x) >> 3)); x &= x - 1; }
+    }
+    for (; s < n; ++s) if (mask[s]) out[m++] = (int32_t)s;
+    return m;
+}
+/* Position of the k-th set bit of x (k < popcount(x)). */
+static inline int kth_bit(uint64_t x, int64_t k) {
+    while (k-- > 0) x &= x - 1;
+    return __builtin_ctzll(x);
+}
+#define MAX_SLOTS 4096 /* N <= 64 */
+static inline int64_t pick_k(double u, int64_t n) {
+    int64_t k = (int64_t)(u * (double)n);
+    return k > n - 1 ? n - 1 : (k < 0 ? 0 : k);
+}
+
+#define DEFINE_BREED(T, SFX)                                                                      \
+static inline T clampT_##SFX(T x, T lo, T hi) { x = x < lo ? lo : x; return x > hi ? hi : x; }   \
+/* Phase 1: crossover (or a copy of the first parent), then the add-node choice. */              \
+void breed1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_t *pn, const T *ps,\
+                  const int64_t *a_idx, const int64_t *b_idx, const uint8_t *do_cross,            \
+                  const uint8_t *active, T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T *cs,     \
+                  int64_t *src, int64_t *dst, uint8_t *request, const int64_t *keys,             \
+                  const int64_t *base, const int64_t *blocks, int64_t R, int64_t P, int64_t N,   \
+                  double inherit_disabled, double node_add_prob, int threads) {                  \
+    const int64_t NN = N * N;                                                                     \
+    _Pragma("omp parallel for schedule(static) num_threads(threads)")                            \
+    for (int64_t row = 0; row < R * P; ++row) {                                                   \
+        const int64_t r = row / P, p = row % P;                                                   \
+        const uint64_t key = (uint64_t)keys[r], b0 = (uint64_t)base[r];                          \
+        const int64_t a = a_idx[row], b = b_idx[row];                                             \
+        const T *fw = pw + a * NN, *ow = pw + b * NN;                                             \
+        const uint8_t *fc = pc + a * NN, *fe = pe + a * NN, *oc = pc + b * NN, *oe = pe + b * NN; \
+        T *w = cw + row * NN; uint8_t *c = cc + row * NN, *e = ce + row * NN;                     \
+        memcpy(c, fc, NN); memcpy(cn + row * N, pn + a * N, N);                                   \
+        memcpy(w, fw, NN * sizeof(T)); /* no gene: weight 0 in every genome */                    \
+        int32_t genes[MAX_SLOTS];                                                                 \
+        if (do_cross[row]) {                                                                      \
+            const uint64_t c_from = b0 + blocks[B_FROM_OTHER] + p * NN;                           \
+            const uint64_t c_stay = b0 + blocks[B_STAYS] + p * NN;                                \
+            memset(e, 0, NN);                                                                     \
+            const int64_t n = set_slots(fc, NN, genes);                                           \
+            for (int64_t g = 0; g < n; ++g) {                                                     \
+                const int64_t s = genes[g];                                                       \
+                const int matching = oc[s] != 0;                                                  \
+                if (matching && uniform01(key, c_from + s) < 0.5) w[s] = ow[s];                   \
+                const int dip = !fe[s] || (matching && !oe[s]);                                   \
+                e[s] = !(dip && uniform01(key, c_stay + s) < inherit_disabled);                   \
+            }                                                                                     \
+            cs[row] = uniform01(key, b0 + blocks[B_SIGMA_PICK] + p) < 0.5 ? ps[b] : ps[a];        \
+        } else {                                                                                  \
+            memcpy(e, fe, NN); cs[row] = ps[a];                                                   \
+        }                                                                                         \
+        request[row] = 0; src[row] = 0; dst[row] = 0;                                             \
+        if (active[row] && uniform01(key, b0 + blocks[B_NODE_WANT] + p) < node_add_prob) {        \
+            const int64_t n = set_slots(e, NN, genes);                                            \
+            if (n > 0) {                                                                          \
+                const int64_t s = genes[pick_k(uniform01(key, b0 + blocks[B_NODE_PICK] + p), n)]; \
+                src[row] = s / N; dst[row] = s % N; request[row] = 1;                             \
+            }                                                                                     \
+        }                                                                                         \
+    }                                                                                             \
+}                                                                                                 \
+/* Phase 2, in place: the granted splits, add-connection, weights, sigma, enabled flags. */     \
+void breed2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T *cs, const int64_t *new_node,  \
+                  const uint8_t *granted, const int64_t *src, const int64_t *dst,                 \
+                  const uint8_t *active, const int64_t *keys, const int64_t *base,                \
+                  const int64_t *blocks, int64_t R, int64_t P, int64_t N, int64_t first_output,   \
+                  int feed_forward, int per_gene, double conn_add_prob, double w_mean,            \
+                  double w_stdev, double w_min, double w_max, double w_rate, double w_rate_sum,   \
+                  double w_replace, double w_power, double s_rate, double s_power, double s_min,  \
+                  double s_max, double toggle_rate, int threads) {                                \
+    const int64_t NN = N * N;                                                                     \
+    const T mean = (T)w_mean, stdev = (T)w_stdev, lo = (T)w_min, hi = (T)w_max, power = (T)w_power;\
+    _Pragma("omp parallel for schedule(static) num_threads(threads)")                            \
+    for (int64_t row = 0; row < R * P; ++row) {                                                   \
+        const int64_t r = row / P, p = row % P;                                                   \
+        const uint64_t key = (uint64_t)keys[r], b0 = (uint64_t)base[r];                          \
+        T *w = cw + row * NN; uint8_t *c = cc + row * NN, *e = ce + row * NN, *nd = cn + row * N; \
+        if (granted[row]) {                                                                       \
+            const int64_t i = src[row], j = dst[row], k = new_node[row];                          \
+            const T old = w[i * N + j];                                                           \
+            e[i * N + j] = 0;                                                                     \
+            w[i * N + k] = (T)1; c[i * N + k] = 1; e[i * N + k] = 1;                              \
+            w[k * N + j] = old; c[k * N + j] = 1; e[k * N + j] = 1;                               \
+            nd[k] = 1;                                                                            \
+        }                                                                                         \
+        if (!active[row]) continue;                                                               \
+        int32_t genes[MAX_SLOTS + 1];                                                             \
+        int64_t n_genes = set_slots(c, NN, genes);                                                \
+        if (uniform01(key, b0 + blocks[B_CONN_WANT] + p) < conn_add_prob) {                       \
+            /* rows as bitsets: out[i] = genes i -> j; into[j] = i with a path i -> j (closure) */\
+            uint64_t out[MAX_ROWS] = {0}, into[MAX_ROWS] = {0}, nodes = 0;                        \
+            for (int64_t j = 0; j < N; ++j) nodes |= (uint64_t)(nd[j] != 0) << j;                 \
+            for (int64_t g = 0; g < n_genes; ++g) {                                               \
+                const int64_t i = genes[g] / N, j = genes[g] % N;                                 \
+                out[i] |= 1ULL << j; into[j] |= 1ULL << i;                                        \
+            }                                                                                     \
+            if (feed_forward)                                                                     \
+                for (int64_t k = 0; k < N; ++k)                                                   \
+                    for (int64_t j = 0; j < N; ++j) if (into[j] >> k & 1) into[j] |= into[k];     \
+            const uint64_t targets = nodes & ~((1ULL << first_output) - 1); /* not into inputs */ \
+            uint64_t cand[MAX_ROWS];                                                              \
+            int64_t n = 0;                                                                        \
+            for (int64_t i = 0; i < N; ++i) {                                                     \
+                uint64_t m = (nodes >> i & 1) ? targets & ~out[i] : 0;                            \
+                if (feed_forward) m &= ~(into[i] | 1ULL << i); /* no self loop, no path j -> i */ \
+                cand[i] = m; n += __builtin_popcountll(m);                                        \
+            }                                                                                     \
+            if (n > 0) {                                                                          \
+                int64_t k = pick_k(uniform01(key, b0 + blocks[B_CONN_PICK] + p), n), i = 0;       \
+                while (k >= __builtin_popcountll(cand[i])) k -= __builtin_popcountll(cand[i++]);  \
+                const int64_t s = i * N + kth_bit(cand[i], k);                                    \
+                T init = (T)normal_at(key, b0 + blocks[B_CONN_INIT] + 2 * p) * stdev;             \
+                init = init + mean;                                                               \
+                w[s] = clampT_##SFX(init, lo, hi); c[s] = 1; e[s] = 1;                             \
+                genes[n_genes++] = (int32_t)s;                                                    \
+            }                                                                                     \
+        }                                                                                         \
+        const int genome_hit = uniform01(key, b0 + blocks[B_W_GENOME] + p) < w_rate;              \
+        const uint64_t c_u = b0 + blocks[B_W_U] + p * NN, c_z = b0 + blocks[B_W_NOISE] + 2 * p * NN;\
+        if (per_gene || genome_hit) {                                                             \
+            for (int64_t g = 0; g < n_genes; ++g) {                                               \
+                const int64_t s = genes[g];                                                       \
+                const double u = uniform01(key, c_u + s);                                         \
+                int hit, replace;                                                                 \
+                if (per_gene) { const int perturb = u < w_rate;                                   \
+                                replace = !perturb && u < w_rate_sum; hit = perturb || replace; }   \
+                else { replace = u < w_replace; hit = 1; }                                        \
+                if (!hit) continue;                                                               \
+                const T z = (T)normal_at(key, c_z + 2 * s);                                       \
+                T fresh = z * stdev; fresh = fresh + mean;                                        \
+                T step = z * power; T pert = w[s] + step;                                         \
+                w[s] = clampT_##SFX(replace ? fresh : pert, lo, hi);                              \
+            }                                                                                     \
+        }                                                                                         \
+        if (uniform01(key, b0 + blocks[B_S_WANT] + p) < s_rate) {                                 \
+            T step = (T)normal_at(key, b0 + blocks[B_S_NOISE] + 2 * p) * (T)s_power;              \
+            cs[row] = clampT_##SFX(cs[row] + step, (T)s_min, (T)s_max);                           \
+        }                                                                                         \
+        const uint64_t c_t = b0 + blocks[B_TOGGLE] + p * NN;                                      \
+        for (int64_t g = 0; g < n_genes; ++g)                                                     \
+            if (uniform01(key, c_t + genes[g]) < toggle_rate) e[genes[g]] ^= 1;                   \
+    }                                                                                             \
+}                                                                                                 \
+typedef struct { const uint64_t *bits; const int64_t *cnt, *top; const T *w, *sig; } genes_##SFX;      \
+/* The compatibility distance of row ra of set a and row rb of set b; or, when the terms     \
+   without weights already reach `bound`, that partial sum (>= bound, and <= the distance:    \
+   the weight term is >= 0 and rounded addition is monotone), skipping the weight term. */   \
+static inline double pair_dist_##SFX(genes_##SFX a, int64_t ra, genes_##SFX b, int64_t rb,      \
+                                     int64_t NN, int64_t W, const double *coef, double bound) { \
+    const uint64_t *A = a.bits + ra * W, *B = b.bits + rb * W;                                    \
+    const int64_t ta = a.top[ra], tb = b.top[rb];                                                 \
+    int64_t match = 0, a_upto = 0, b_upto = 0;                                                    \
+    for (int64_t k = 0; k < W; ++k) {                                                             \
+        match += __builtin_popcountll(A[k] & B[k]);                                               \
+        /* genes of A at slots <= tb, of B at slots <= ta */                                      \
+        const int64_t lo = k * 64;                                                                \
+        if (tb >= lo) a_upto += __builtin_popcountll(tb - lo >= 63 ? A[k] : A[k] & ((2ULL << (tb - lo)) - 1)); \
+        if (ta >= lo) b_upto += __builtin_popcountll(ta - lo >= 63 ? B[k] : B[k] & ((2ULL << (ta - lo)) - 1)); \
+    }                                                                                             \
+    const double na = (double)a.cnt[ra], nb = (double)b.cnt[rb];                                  \
+    const double excess = (na - (double)a_upto) + (nb - (double)b_upto);                          \
+    const double disjoint = na + nb - 2.0 * (double)match - excess;                               \
+    const double n_max = na > nb ? na : nb;                                                       \
+    const double norm = n_max >= coef[4] ? n_max : 1.0;                                           \
+    const double structure = coef[0] * excess / norm + coef[1] * disjoint / norm;                 \
+    const double sigma = coef[3] * fabs((double)a.sig[ra] - (double)b.sig[rb]);                   \
+    const double partial = structure + sigma;                                                     \
+    if (partial >= bound) return partial;                                                         \
+    double wdiff = 0.0;                                                                           \
+    const T *wa = a.w + ra * NN, *wb = b.w + rb * NN;                                             \
+    for (int64_t k = 0; k < W; ++k)                                                               \
+        for (uint64_t both = A[k] & B[k]; both; both &= both - 1) {                               \
+            const int64_t s = k * 64 + __builtin_ctzll(both);                                     \
+            wdiff += fabs((double)wa[s] - (double)wb[s]);                                         \
+        }                                                                                         \
+    const double w_mean = match > 0 ? wdiff / (double)match : 0.0;                                \
+    return structure + coef[2] * w_mean + sigma;                                                  \
+}                                                                                                 \
+/* Distances between genome rows a[r, i] and b[r, j] (rows index the sets' flat arrays). */     \
+void distances_##SFX(const uint64_t *bits_a, const int64_t *cnt_a, const int64_t *top_a,         \
+                     const T *w_a, const T *sig_a, const int64_t *rows_a, int64_t Ka,            \
+                     const uint64_t *bits_b, const int64_t *cnt_b, const int64_t *top_b,         \
+                     const T *w_b, const T *sig_b, const int64_t *rows_b, int64_t Kb,            \
+                     int64_t R, int64_t NN, int64_t W, const double *coef, double *out, int threads) { \
+    const genes_##SFX a = {bits_a, cnt_a, top_a, w_a, sig_a}, b = {bits_b, cnt_b, top_b, w_b, sig_b}; \
+    _Pragma("omp parallel for schedule(static) num_threads(threads)")                            \
+    for (int64_t q = 0; q < R * Ka; ++q) {                                                        \
+        const int64_t r = q / Ka;                                                                 \
+        for (int64_t jb = 0; jb < Kb; ++jb)                                                       \
+            out[q * Kb + jb] = pair_dist_##SFX(a, rows_a[q], b, rows_b[r * Kb + jb], NN, W, coef, INFINITY); \
+    }                                                                                             \
+}                                                                                                 \
+/* Species of genomes g[R, P] (speciate's rule): the closest living representative of rep[R, S] \
+   within thr, first slot on ties; the rest found species in genome order, each in the lowest \
+   slot without members (slots >= S mean the caller must grow), and every genome still without \
+   a species within thr of a founder joins it. founded[r, k]: run r's k-th new slot. */         \
+void assign_species_##SFX(const uint64_t *g_bits, const int64_t *g_cnt, const int64_t *g_top,   \
+                          const T *g_w, const T *g_sig, const uint64_t *r_bits, const int64_t *r_cnt,\
+                          const int64_t *r_top, const T *r_w, const T *r_sig, const uint8_t *alive, \
+                          int64_t R, int64_t P, int64_t S, int64_t NN, int64_t W, const double *coef,\
+                          double thr, int64_t *species, int64_t *founded, int64_t *n_founded,     \
+                          uint8_t *taken, int threads) {                                          \
+    const genes_##SFX g = {g_bits, g_cnt, g_top, g_w, g_sig}, rep = {r_bits, r_cnt, r_top, r_w, r_sig}; \
+    _Pragma("omp parallel for schedule(static) num_threads(threads)")                            \
+    for (int64_t r = 0; r < R; ++r) {                                                             \
+        int64_t *sp = species + r * P;                                                            \
+        uint8_t *tk = taken + r * (S + P);                                                        \
+        memset(tk, 0, S + P);                                                                     \
+        for (int64_t p = 0; p < P; ++p) {                                                         \
+            double best = INFINITY; int64_t bk = -1;                                              \
+            for (int64_t s = 0; s < S; ++s) {                                                     \
+                if (!alive[r * S + s]) continue;                                                  \
+                const double d = pair_dist_##SFX(g, r * P + p, rep, r * S + s, NN, W, coef,       \
+                                                 best < thr ? best : thr);                        \
+                if (d < best) { best = d; bk = s; }                                               \
+            }                                                                                     \
+            sp[p] = best < thr ? bk : -1;                                                         \
+            if (sp[p] >= 0) tk[sp[p]] = 1;                                                        \
+        }                                                                                         \
+        int64_t n = 0, free_slot = 0;                                                             \
+        for (int64_t p = 0; p < P; ++p) {                                                         \
+            if (sp[p] >= 0) continue;                                                             \
+            while (tk[free_slot]) ++free_slot;                                                    \
+            const int64_t slot = free_slot;                                                       \
+            tk[slot] = 1; sp[p] = slot; founded[r * P + n++] = slot;                              \
+            for (int64_t q = p + 1; q < P; ++q)                                                   \
+                if (sp[q] < 0 && pair_dist_##SFX(g, r * P + q, g, r * P + p, NN, W, coef, thr) < thr) sp[q] = slot; \
+        }                                                                                         \
+        n_founded[r] = n;                                                                         \
+    }                                                                                             \
+}
+DEFINE_BREED(float, f32)
+DEFINE_BREED(double, f64)
+
+/* Normals at counters c0, c0 + 2, ... of a stream (for the tests). */
+void normals_check(uint64_t key, uint64_t c0, int64_t n, double *out) {
+    for (int64_t k = 0; k < n; ++k) out[k] = normal_at(key, c0 + 2 * (uint64_t)k);
+}
+/* Gene bitsets, counts and highest occupied slot (-1: none) of rows conn[M, NN]. */
+void gene_bits(const uint8_t *conn, int64_t M, int64_t NN, int64_t W, uint64_t *bits, int64_t *count,
+               int64_t *top, int threads) {
+    _Pragma("omp parallel for schedule(static) num_threads(threads)")
+    for (int64_t m = 0; m < M; ++m) {
+        const uint8_t *c = conn + m * NN;
+        uint64_t *b = bits + m * W;
+        int64_t n = 0, t = -1;
+        for (int64_t k = 0; k < W; ++k) {
+            uint64_t word = 0;
+            const int64_t hi = (k + 1) * 64 < NN ? (k + 1) * 64 : NN;
+            for (int64_t s = k * 64; s < hi; ++s) word |= (uint64_t)(c[s] != 0) << (s - k * 64);
+            b[k] = word;
+            n += __builtin_popcountll(word);
+            if (word) t = k * 64 + 63 - __builtin_clzll(word);
+        }
+        count[m] = n; top[m] = t;
+    }
+}
+"""
+
+_lib: ctypes.CDLL | None = None
+_lock = threading.Lock()
+MAX_NODES = 64  # the feed-forward closure keeps a row of the adjacency in one 64-bit word
+
+
+def kernel_available() -> bool:
+    """True if the breeding kernels compiled (once per process) and are enabled."""
+    global _lib
+    with _lock:
+        _lib = load_c_library("neat_breed", _SOURCE)
+        if _lib is not None and not hasattr(_lib, "_typed"):
+            P, L, D, C = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double, ctypes.c_int
+            for sfx in ("f32", "f64"):
+                f = getattr(_lib, f"breed1_{sfx}")
+                f.restype, f.argtypes = None, [P] * 20 + [L] * 3 + [D] * 2 + [C]
+                f = getattr(_lib, f"breed2_{sfx}")
+                f.restype, f.argtypes = None, [P] * 13 + [L] * 4 + [C] * 2 + [D] * 14 + [C]
+                f = getattr(_lib, f"distances_{sfx}")
+                f.restype, f.argtypes = None, [P] * 6 + [L] + [P] * 6 + [L] * 4 + [P, P, C]
+                f = getattr(_lib, f"assign_species_{sfx}")
+                f.restype, f.argtypes = None, [P] * 11 + [L] * 5 + [P, D] + [P] * 4 + [C]
+            _lib.normals_check.restype = None
+            _lib.normals_check.argtypes = [ctypes.c_uint64, ctypes.c_uint64, L, P]
+            _lib.gene_bits.restype = None
+            _lib.gene_bits.argtypes = [P, L, L, L, P, P, P, C]
+            _lib._typed = True
+    return _lib is not None
+
+
+def usable_for(g: Genomes) -> bool:
+    """The kernels take CPU genomes of float32/float64 with at most ``MAX_NODES`` nodes."""
+    return (g.device.type == "cpu" and g.weight.dtype in (torch.float32, torch.float64)
+            and g.num_nodes <= MAX_NODES and kernel_available())
+
+
+def _sfx(dtype: torch.dtype) -> str:
+    return "f32" if dtype == torch.float32 else "f64"
+
+
+def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: Tensor, cfg: NEATConfig,
+          rng: RunRNG, reserved: Tensor | None) -> tuple[Genomes, Tensor]:
+    """Children ``[R, P]`` of parents ``first`` / ``second`` (``[R, P]`` genome indices of
+    ``g``; ``first`` is the fitter where ``do_cross``), mutated where ``active``: the same as
+    ``crossover`` then ``mutate_add_node``, ``mutate_add_connection``, ``mutate_weights``,
+    ``mutate_sigma`` and ``mutate_toggle_enabled``, and the same draws. Returns the children and
+    ``[R, P]`` bool: splits refused for want of a free node slot."""
+    R, P, N = g.num_runs, g.pop_size, g.num_nodes
+    T = g.weight.dtype
+    threads = torch.get_num_threads()
+    starts, total = breed_blocks(P, N)
+    base = rng.take(total)
+    keys, blocks = rng.keys.contiguous(), torch.tensor(starts, dtype=torch.int64)
+    parents = {k: v.contiguous() for k, v in g.tensors().items()}
+    rows = torch.arange(R).unsqueeze(1) * P
+    a_idx, b_idx = (first + rows).contiguous(), (second + rows).contiguous()
+    cross, act = do_cross.to(torch.uint8).contiguous(), active.to(torch.uint8).contiguous()
+    child = Genomes(torch.empty_like(parents["weight"]), torch.empty_like(parents["conn"]),
+                    torch.empty_like(parents["enabled"]), torch.empty_like(parents["node"]),
+                    torch.empty_like(parents["sigma"]))
+    src = torch.empty(R, P, dtype=torch.int64)
+    dst = torch.empty(R, P, dtype=torch.int64)
+    request = torch.empty(R, P, dtype=torch.uint8)
+    getattr(_lib, f"breed1_{_sfx(T)}")(
+        parents["weight"].data_ptr(), parents["conn"].data_ptr(), parents["enabled"].data_ptr(),
+        parents["node"].data_ptr(), parents["sigma"].data_ptr(), a_idx.data_ptr(), b_idx.data_ptr(),
+        cross.data_ptr(), act.data_ptr(), child.weight.data_ptr(), child.conn.data_ptr(),
+        child.enabled.data_ptr(), child.node.data_ptr(), child.sigma.data_ptr(), src.data_ptr(),
+        dst.data_ptr(), request.data_ptr(), keys.data_ptr(), base.data_ptr(), blocks.data_ptr(), R, P, N,
+        float(cfg.disabled_inherit_prob), float(cfg.node_add_prob), threads)
+    want = request.bool()
+    used = child.node.any(1)
+    if reserved is not None:
+        used = used | reserved
+    new_node, granted = assign_split_nodes(src, dst, want, used, cfg.first_hidden)
+    new_node, granted8 = new_node.contiguous(), granted.to(torch.uint8).contiguous()
+    getattr(_lib, f"breed2_{_sfx(T)}")(
+        child.weight.data_ptr(), child.conn.data_ptr(), child.enabled.data_ptr(), child.node.data_ptr(),
+        child.sigma.data_ptr(), new_node.data_ptr(), granted8.data_ptr(), src.data_ptr(), dst.data_ptr(),
+        act.data_ptr(), keys.data_ptr(), base.data_ptr(), blocks.data_ptr(), R, P, N, cfg.first_output,
+        int(cfg.feed_forward), int(cfg.weight_mutate_per_gene), float(cfg.conn_add_prob),
+        float(cfg.weight_init_mean), float(cfg.weight_init_stdev), float(cfg.weight_min_value),
+        float(cfg.weight_max_value), float(cfg.weight_mutate_rate),
+        float(cfg.weight_mutate_rate + cfg.weight_replace_rate), float(cfg.weight_replace_rate),
+        float(cfg.weight_mutate_power), float(cfg.sigma_mutate_rate), float(cfg.sigma_mutate_power),
+        float(cfg.sigma_min_value), float(cfg.sigma_max_value), float(cfg.enabled_mutate_rate), threads)
+    return child, want & ~granted
+
+
+class GeneBits:
+    """Gene bitsets of a set of genomes ``conn [..., N, N]`` (flattened to rows), with their
+    weights and sigmas, for ``gene_distances``."""
+
+    def __init__(self, conn: Tensor, weight: Tensor, sigma: Tensor) -> None:
+        N = conn.shape[-1]
+        self.nn = N * N
+        self.words = (self.nn + 63) // 64
+        c = conn.reshape(-1, self.nn).contiguous()
+        M = c.shape[0]
+        self.weight = weight.reshape(M, self.nn).contiguous()
+        self.sigma = sigma.reshape(M).to(weight.dtype).contiguous()
+        self.bits = torch.empty(M, self.words, dtype=torch.int64)
+        self.count = torch.empty(M, dtype=torch.int64)
+        self.top = torch.empty(M, dtype=torch.int64)
+        _lib.gene_bits(c.data_ptr(), M, self.nn, self.words, self.bits.data_ptr(), self.count.data_ptr(),
+                       self.top.data_ptr(), torch.get_num_threads())
+
+
+def _coefficients(cfg: NEATConfig) -> Tensor:
+    return torch.tensor([cfg.compatibility_excess_coefficient, cfg.compatibility_disjoint_coefficient,
+                         cfg.compatibility_weight_coefficient, cfg.compatibility_sigma_coefficient,
+                         cfg.compatibility_normalize_min_genes], dtype=torch.float64)
+
+
+def _genes_args(g: GeneBits) -> list[int]:
+    return [g.bits.data_ptr(), g.count.data_ptr(), g.top.data_ptr(), g.weight.data_ptr(), g.sigma.data_ptr()]
+
+
+def gene_distances(a: GeneBits, rows_a: Tensor, b: GeneBits, rows_b: Tensor, cfg: NEATConfig) -> Tensor:
+    """Distances ``[R, Ka, Kb]`` (float64) between rows ``rows_a[R, Ka]`` of ``a`` and
+    ``rows_b[R, Kb]`` of ``b`` (flat row indices), as ``evolution.distance.distance``."""
+    R, Ka = rows_a.shape
+    Kb = rows_b.shape[1]
+    out = torch.empty(R, Ka, Kb, dtype=torch.float64)
+    if R * Ka * Kb == 0:
+        return out
+    ra, rb, coef = rows_a.contiguous(), rows_b.contiguous(), _coefficients(cfg)
+    getattr(_lib, f"distances_{_sfx(a.weight.dtype)}")(
+        *_genes_args(a), ra.data_ptr(), Ka, *_genes_args(b), rb.data_ptr(), Kb, R, a.nn, a.words,
+        coef.data_ptr(), out.data_ptr(), torch.get_num_threads())
+    return out
+
+
+def assign_species(genes: GeneBits, reps: GeneBits, alive: Tensor, cfg: NEATConfig) -> tuple[Tensor, Tensor, Tensor]:
+    """``speciate``'s assignment for genomes ``genes`` (``R x P`` rows) and representatives
+    ``reps`` (``R x S`` rows, ``alive[R, S]``): the closest living representative within the
+    threshold, else a new species founded in genome order (``evolution.speciate``).
+
+    Returns ``(species [R, P], founded [R, P], n_founded [R])``: run ``r``'s new species are
+    in slots ``founded[r, :n_founded[r]]``, in founding order; a slot >= S asks for growth."""
+    R, S = alive.shape
+    P = genes.count.shape[0] // R
+    species = torch.empty(R, P, dtype=torch.int64)
+    founded = torch.zeros(R, P, dtype=torch.int64)
+    n_founded = torch.empty(R, dtype=torch.int64)
+    taken = torch.empty(R, S + P, dtype=torch.uint8)
+    alive8, coef = alive.to(torch.uint8).contiguous(), _coefficients(cfg)
+    getattr(_lib, f"assign_species_{_sfx(genes.weight.dtype)}")(
+        *_genes_args(genes), *_genes_args(reps), alive8.data_ptr(), R, P, S, genes.nn, genes.words,
+        coef.data_ptr(), float(cfg.compatibility_threshold), species.data_ptr(), founded.data_ptr(),
+        n_founded.data_ptr(), taken.data_ptr(), torch.get_num_threads())
+    return species, founded, n_founded

@@ -1,0 +1,162 @@
+"""The C breeding kernels against the tensor reference, and the counter-based streams."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import stats
+
+from evolution import breed_kernel
+from evolution.distance import distance, gene_stats
+from evolution.neat import NEAT
+from evolution.reproduce import reproduce
+from evolution.rng import RunRNG, _cos_2pi, _log_unit, _sqrt, box_muller
+from evolution.speciate import SpeciesState, empty_species, speciate
+from tasks.experiments.cartpole import controller_config
+from tasks.xor import XOR_CONFIG
+from tests.evolution.helpers import population, small_config
+
+needs_kernel = pytest.mark.skipif(not breed_kernel.kernel_available(), reason="no C compiler: kernels unavailable")
+
+
+def _equal_state(a: NEAT, b: NEAT) -> None:
+    for name, t in a.genomes.tensors().items():
+        assert torch.equal(t, getattr(b.genomes, name)), name
+    assert torch.equal(a.species, b.species)
+    for name, t in a.species_state.tensors().items():
+        assert torch.equal(t, getattr(b.species_state, name)), name
+    assert torch.equal(a.rng.offsets, b.rng.offsets)
+
+
+@needs_kernel
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("setting", ["xor", "snn", "sigmoid"])
+def test_kernel_breeds_the_same_generations_as_the_tensor_operators(setting, dtype):
+    cfg = (dataclasses.replace(XOR_CONFIG, node_add_prob=0.2, conn_add_prob=0.3) if setting == "xor"
+           else controller_config(setting, node_add_prob=0.1, conn_add_prob=0.3))
+    runs = []
+    for fused in (False, True):
+        neat = NEAT(cfg, seeds=[3, 11, 12], dtype=dtype)
+        neat.fused_breeding = fused
+        g = torch.Generator().manual_seed(7)
+        for _ in range(12):
+            neat.tell(torch.rand(3, cfg.pop_size, generator=g, dtype=torch.float64) * 16)
+        runs.append(neat)
+    ref, fast = runs
+    _equal_state(ref, fast)
+    # The generations did what a test of equality needs: structure grew, species formed.
+    assert ref.genomes.num_hidden(cfg).sum() > 0
+    assert int(ref.species_state.alive.sum(1).min()) > 1
+
+
+@needs_kernel
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), feed_forward=st.booleans(), node_add=st.sampled_from([0.3, 1.0]),
+       per_gene=st.booleans(), generations=st.integers(1, 6))
+def test_kernel_matches_reference_on_small_populations(seed, feed_forward, node_add, per_gene, generations):
+    # Tiny node capacity and node_add 1.0: splits are refused for want of a slot.
+    cfg = small_config(feed_forward=feed_forward, node_add_prob=node_add, conn_add_prob=0.5,
+                       enabled_mutate_rate=0.1, weight_mutate_per_gene=per_gene)
+    out = []
+    for fused in (False, True):
+        g, rng = population(cfg, seeds=(seed, seed + 1))
+        sp = empty_species(2, cfg.num_nodes, 2, device=g.device, dtype=g.weight.dtype)
+        species, sp = speciate(g, sp, cfg, rng, 0, fused=fused)
+        refused = []
+        for gen in range(generations):
+            fitness = rng.rand(cfg.pop_size, dtype=torch.float64) * 10
+            g, _, sp, info = reproduce(g, fitness, species, sp, cfg, rng, gen, fused=fused)
+            species, sp = speciate(g, sp, cfg, rng, gen + 1, fused=fused)
+            refused.append(info.split_refused)
+        out.append((g, species, sp, torch.stack(refused), rng.offsets))
+    (g0, s0, sp0, r0, o0), (g1, s1, sp1, r1, o1) = out
+    for name, t in g0.tensors().items():
+        assert torch.equal(t, getattr(g1, name)), name
+    assert torch.equal(s0, s1) and torch.equal(r0, r1) and torch.equal(o0, o1)
+    for name, t in sp0.tensors().items():
+        assert torch.equal(t, getattr(sp1, name)), name
+
+
+@needs_kernel
+def test_kernel_distances_equal_the_reference():
+    cfg = controller_config("snn", node_add_prob=0.3, conn_add_prob=0.5)
+    neat = NEAT(cfg, seeds=[0, 1])
+    for k in range(6):
+        neat.tell(torch.rand(2, cfg.pop_size, generator=torch.Generator().manual_seed(k), dtype=torch.float64))
+    g = neat.genomes
+    ref = distance(gene_stats(g.conn, g.weight, g.sigma), gene_stats(g.conn, g.weight, g.sigma), cfg)
+    bits = breed_kernel.GeneBits(g.conn, g.weight, g.sigma)
+    rows = torch.arange(2 * cfg.pop_size).view(2, cfg.pop_size)
+    fast = breed_kernel.gene_distances(bits, rows, bits, rows, cfg)
+    torch.testing.assert_close(fast, ref, rtol=0, atol=1e-12)
+    assert float(ref.std()) > 0.1  # genomes that differ
+
+
+def test_founders_never_take_a_slot_that_has_members():
+    # Genome 0 joins the species in slot 0; genomes 1 and 2 match nothing and are last in
+    # genome order. A scatter of flags once let their clamped -1 mark slot 0 free, so a new
+    # species merged into slot 0.
+    cfg = small_config(compatibility_threshold=0.5)
+    g, rng = population(cfg, seeds=(0,))
+    g.weight[0, 1:] = torch.where(g.conn[0, 1:], 8.0, 0.0)  # far from genome 0 in weight
+    sp = empty_species(1, cfg.num_nodes, 2, device=g.device, dtype=g.weight.dtype)
+    sp.alive[0, 0] = True
+    sp.rep_conn[0, 0], sp.rep_weight[0, 0], sp.rep_sigma[0, 0] = g.conn[0, 0], g.weight[0, 0], g.sigma[0, 0]
+    for fused in [False] + ([True] if breed_kernel.kernel_available() else []):
+        state = SpeciesState(**{k: v.clone() for k, v in sp.tensors().items()})
+        species, _ = speciate(g, state, cfg, RunRNG([0]), 1, fused=fused)
+        assert species[0, 0] == 0
+        assert (species[0, 1:] != 0).all(), fused
+
+
+def test_box_muller_is_accurate_and_normal():
+    u = RunRNG([1]).rand(400_000, dtype=torch.float64)[0]
+    x = 1.0 - u
+    torch.testing.assert_close(_log_unit(x), torch.log(x), rtol=1e-15, atol=4e-15)
+    torch.testing.assert_close(_cos_2pi(u), torch.cos(2 * torch.pi * u), rtol=0, atol=2e-15)
+    v = u * 80
+    torch.testing.assert_close(_sqrt(v), torch.from_numpy(np.sqrt(v.numpy())), rtol=3e-16, atol=0)
+    assert _sqrt(torch.zeros(1, dtype=torch.float64)).item() == 0.0
+    z = box_muller(u[::2], u[1::2])
+    assert stats.kstest(z.numpy(), "norm").pvalue > 1e-3
+    assert stats.shapiro(z[:4000].numpy()).pvalue > 1e-3
+
+
+@needs_kernel
+def test_c_normals_equal_torch_normals_bit_for_bit():
+    rng = RunRNG([5, 6])
+    z = rng.randn(100_000, dtype=torch.float64)
+    for r in range(2):
+        out = torch.empty(100_000, dtype=torch.float64)
+        breed_kernel._lib.normals_check(int(rng.keys[r]) & (2**64 - 1), 0, 100_000, out.data_ptr())
+        assert torch.equal(out, z[r])
+
+
+def test_a_run_draws_the_same_alone_and_in_a_batch():
+    batch, alone = RunRNG([4, 9, 2]), RunRNG([9])
+    for shape in [(5,), (3, 4), (2,)]:
+        assert torch.equal(batch.rand(*shape, dtype=torch.float64)[1], alone.rand(*shape, dtype=torch.float64)[0])
+        assert torch.equal(batch.randn(*shape)[1], alone.randn(*shape)[0])
+    sub = batch.subset([2, 1])
+    assert torch.equal(sub.rand(3)[1], alone.rand(3)[0])  # a subset draws from, and advances, its parent
+    assert batch.offsets[1] == alone.offsets[0] and batch.offsets[0] != batch.offsets[1]
+    u = batch.rand(100_000)
+    assert u.dtype == torch.float32 and 0.0 <= float(u.min()) and float(u.max()) < 1.0
+
+
+def test_stream_state_round_trips_and_rejects_bad_input():
+    rng = RunRNG([1, 2])
+    rng.rand(7)
+    state = rng.get_state()
+    a = rng.randn(4)
+    rng.set_state(state)
+    assert torch.equal(rng.randn(4), a)
+    with pytest.raises(ValueError, match="offsets"):
+        rng.set_state(torch.zeros(3, dtype=torch.int64))
+    with pytest.raises(ValueError, match="non-negative"):
+        rng.set_state(torch.tensor([-1, 0]))
+    with pytest.raises(ValueError, match="float32 or float64"):
+        rng.rand(2, dtype=torch.float16)
