@@ -10,7 +10,9 @@ Populations are runs of 150 genomes (the paper's size) in the XOR layout (2 inpu
 random fitness so genomes carry hidden nodes and many species exist. neat-python
 (``pip install -e ".[bench]"``) runs its ``DefaultReproduction.reproduce`` plus
 ``DefaultSpeciesSet.speciate`` on one population of the same total size, same rates.
-Medians of ``--repeats`` steps; one thread unless ``--threads`` says otherwise.
+Medians of ``--repeats`` steps; one thread unless ``--threads`` says otherwise. The same
+step by the tensor operators (``NEAT.fused_breeding = False``, the reference and CUDA path)
+is timed beside the C kernels up to 9000 genomes.
 
 ``--generation-share`` times real generations instead: Table II's task (non-Markov cart-pole,
 the tuned GA settings of each controller), 60 runs of 150 genomes, evaluation (the C closed
@@ -35,13 +37,16 @@ def _fitness(neat: NEAT, seed: int) -> torch.Tensor:
     return torch.rand(neat.num_runs, neat.config.pop_size, generator=g, dtype=torch.float64) * 16
 
 
-def time_snn_neat(total: int, max_hidden: int, warmup: int, repeats: int) -> tuple[float, float]:
-    """Median seconds per reproduction step, and mean hidden nodes per genome."""
+def time_snn_neat(total: int, max_hidden: int, warmup: int, repeats: int,
+                  fused: bool | None = None) -> tuple[float, float, float]:
+    """Median seconds per reproduction step, mean hidden nodes per genome, mean living
+    species per run. ``fused=False``: the tensor operators instead of the C kernels."""
     import dataclasses
 
     cfg = dataclasses.replace(XOR_CONFIG, max_hidden=max_hidden, node_add_prob=0.2, conn_add_prob=0.3)
     runs = max(1, total // cfg.pop_size)
     neat = NEAT(cfg, seeds=range(runs))
+    neat.fused_breeding = fused
     for k in range(warmup):
         neat.tell(_fitness(neat, k))
     times = []
@@ -50,7 +55,8 @@ def time_snn_neat(total: int, max_hidden: int, warmup: int, repeats: int) -> tup
         start = time.perf_counter()
         neat.tell(f)
         times.append(time.perf_counter() - start)
-    return statistics.median(times), neat.genomes.num_hidden(cfg).double().mean().item()
+    return (statistics.median(times), neat.genomes.num_hidden(cfg).double().mean().item(),
+            neat.species_state.alive.sum(1).double().mean().item())
 
 
 def time_neat_python(total: int, warmup: int, repeats: int) -> float | None:
@@ -187,14 +193,18 @@ def main() -> None:
         return
     sizes = [150, 9000] if args.quick else [150, 9000, 100000]
     print(f"torch {torch.__version__}, {args.threads} thread(s), XOR layout with {args.max_hidden} hidden slots")
-    print(f"{'R x P':>8} {'snn-neat s/step':>16} {'us/genome':>10} {'hidden/genome':>14} "
-          f"{'neat-python s/step':>19} {'us/genome':>10} {'speed-up':>9}")
+    print("snn-neat: C kernels (the default on CPU); tensor ops: the same step by the tensor operators")
+    print(f"{'R x P':>8} {'snn-neat s/step':>16} {'us/genome':>10} {'hidden':>7} {'species':>8} "
+          f"{'tensor ops us/genome':>21} {'neat-python s/step':>19} {'us/genome':>10} {'speed-up':>9}")
     for total in sizes:
-        t, hidden = time_snn_neat(total, args.max_hidden, args.warmup, args.repeats)
+        t, hidden, species = time_snn_neat(total, args.max_hidden, args.warmup, args.repeats)
+        t_ref = None if total > 9000 else time_snn_neat(total, args.max_hidden, args.warmup, args.repeats, False)[0]
+        ref_col = f"{1e6 * t_ref / total:>21.1f}" if t_ref is not None else f"{'-':>21}"
         t_np = None if args.no_neat_python or total > 9000 else time_neat_python(total, args.warmup, args.repeats)
         np_cols = (f"{t_np:>19.4f} {1e6 * t_np / total:>10.1f} {t_np / t:>8.1f}x" if t_np is not None
                    else f"{'-':>19} {'-':>10} {'-':>9}")
-        print(f"{total:>8} {t:>16.4f} {1e6 * t / total:>10.1f} {hidden:>14.2f} {np_cols}", flush=True)
+        print(f"{total:>8} {t:>16.4f} {1e6 * t / total:>10.2f} {hidden:>7.2f} {species:>8.1f} {ref_col} {np_cols}",
+              flush=True)
     print("target (issue 8): under 1 us per genome at 9000, and under 5% of a generation (--generation-share)")
 
 

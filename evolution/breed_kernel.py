@@ -115,12 +115,18 @@ void breed1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8
             const uint64_t c_stay = b0 + blocks[B_STAYS] + p * NN;                                \
             memset(e, 0, NN);                                                                     \
             const int64_t n = set_slots(fc, NN, genes);                                           \
+            double u_from[MAX_SLOTS], u_stay[MAX_SLOTS];                                          \
+            _Pragma("omp simd")                                                                   \
+            for (int64_t g = 0; g < n; ++g) {                                                     \
+                u_from[g] = uniform01(key, c_from + genes[g]);                                    \
+                u_stay[g] = uniform01(key, c_stay + genes[g]);                                    \
+            }                                                                                     \
             for (int64_t g = 0; g < n; ++g) {                                                     \
                 const int64_t s = genes[g];                                                       \
                 const int matching = oc[s] != 0;                                                  \
-                if (matching && uniform01(key, c_from + s) < 0.5) w[s] = ow[s];                   \
+                if (matching && u_from[g] < 0.5) w[s] = ow[s];                                    \
                 const int dip = !fe[s] || (matching && !oe[s]);                                   \
-                e[s] = !(dip && uniform01(key, c_stay + s) < inherit_disabled);                   \
+                e[s] = !(dip && u_stay[g] < inherit_disabled);                                    \
             }                                                                                     \
             cs[row] = uniform01(key, b0 + blocks[B_SIGMA_PICK] + p) < 0.5 ? ps[b] : ps[a];        \
         } else {                                                                                  \
@@ -195,18 +201,27 @@ void breed2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T *cs, const int
         const int genome_hit = uniform01(key, b0 + blocks[B_W_GENOME] + p) < w_rate;              \
         const uint64_t c_u = b0 + blocks[B_W_U] + p * NN, c_z = b0 + blocks[B_W_NOISE] + 2 * p * NN;\
         if (per_gene || genome_hit) {                                                             \
+            /* which genes change (and how), then their normals in one vector loop */             \
+            double u[MAX_SLOTS + 1], z[MAX_SLOTS + 1];                                            \
+            int32_t hit[MAX_SLOTS + 1]; uint8_t replace[MAX_SLOTS + 1];                           \
+            _Pragma("omp simd")                                                                   \
+            for (int64_t g = 0; g < n_genes; ++g) u[g] = uniform01(key, c_u + genes[g]);          \
+            int64_t n_hit = 0;                                                                    \
             for (int64_t g = 0; g < n_genes; ++g) {                                               \
-                const int64_t s = genes[g];                                                       \
-                const double u = uniform01(key, c_u + s);                                         \
-                int hit, replace;                                                                 \
-                if (per_gene) { const int perturb = u < w_rate;                                   \
-                                replace = !perturb && u < w_rate_sum; hit = perturb || replace; }   \
-                else { replace = u < w_replace; hit = 1; }                                        \
-                if (!hit) continue;                                                               \
-                const T z = (T)normal_at(key, c_z + 2 * s);                                       \
-                T fresh = z * stdev; fresh = fresh + mean;                                        \
-                T step = z * power; T pert = w[s] + step;                                         \
-                w[s] = clampT_##SFX(replace ? fresh : pert, lo, hi);                              \
+                int h, rep;                                                                       \
+                if (per_gene) { const int perturb = u[g] < w_rate;                                \
+                                rep = !perturb && u[g] < w_rate_sum; h = perturb || rep; }         \
+                else { rep = u[g] < w_replace; h = 1; }                                           \
+                hit[n_hit] = genes[g]; replace[n_hit] = (uint8_t)rep; n_hit += h;                 \
+            }                                                                                     \
+            _Pragma("omp simd")                                                                   \
+            for (int64_t h = 0; h < n_hit; ++h) z[h] = normal_at(key, c_z + 2 * (uint64_t)hit[h]); \
+            for (int64_t h = 0; h < n_hit; ++h) {                                                 \
+                const int64_t s = hit[h];                                                         \
+                const T zt = (T)z[h];                                                             \
+                T fresh = zt * stdev; fresh = fresh + mean;                                       \
+                T step = zt * power; T pert = w[s] + step;                                        \
+                w[s] = clampT_##SFX(replace[h] ? fresh : pert, lo, hi);                           \
             }                                                                                     \
         }                                                                                         \
         if (uniform01(key, b0 + blocks[B_S_WANT] + p) < s_rate) {                                 \
@@ -214,11 +229,13 @@ void breed2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T *cs, const int
             cs[row] = clampT_##SFX(cs[row] + step, (T)s_min, (T)s_max);                           \
         }                                                                                         \
         const uint64_t c_t = b0 + blocks[B_TOGGLE] + p * NN;                                      \
-        for (int64_t g = 0; g < n_genes; ++g)                                                     \
-            if (uniform01(key, c_t + genes[g]) < toggle_rate) e[genes[g]] ^= 1;                   \
+        uint8_t flip[MAX_SLOTS + 1];                                                              \
+        _Pragma("omp simd")                                                                       \
+        for (int64_t g = 0; g < n_genes; ++g) flip[g] = uniform01(key, c_t + genes[g]) < toggle_rate; \
+        for (int64_t g = 0; g < n_genes; ++g) e[genes[g]] ^= flip[g];                             \
     }                                                                                             \
 }                                                                                                 \
-typedef struct { const uint64_t *bits; const int64_t *cnt, *top; const T *w, *sig; } genes_##SFX;      \
+typedef struct { const uint64_t *bits; const int64_t *before, *cnt, *top; const T *w, *sig; } genes_##SFX; \
 /* The compatibility distance of row ra of set a and row rb of set b; or, when the terms     \
    without weights already reach `bound`, that partial sum (>= bound, and <= the distance:    \
    the weight term is >= 0 and rounded addition is monotone), skipping the weight term. */   \
@@ -226,14 +243,13 @@ static inline double pair_dist_##SFX(genes_##SFX a, int64_t ra, genes_##SFX b, i
                                      int64_t NN, int64_t W, const double *coef, double bound) { \
     const uint64_t *A = a.bits + ra * W, *B = b.bits + rb * W;                                    \
     const int64_t ta = a.top[ra], tb = b.top[rb];                                                 \
-    int64_t match = 0, a_upto = 0, b_upto = 0;                                                    \
-    for (int64_t k = 0; k < W; ++k) {                                                             \
-        match += __builtin_popcountll(A[k] & B[k]);                                               \
-        /* genes of A at slots <= tb, of B at slots <= ta */                                      \
-        const int64_t lo = k * 64;                                                                \
-        if (tb >= lo) a_upto += __builtin_popcountll(tb - lo >= 63 ? A[k] : A[k] & ((2ULL << (tb - lo)) - 1)); \
-        if (ta >= lo) b_upto += __builtin_popcountll(ta - lo >= 63 ? B[k] : B[k] & ((2ULL << (ta - lo)) - 1)); \
-    }                                                                                             \
+    int64_t match = 0;                                                                            \
+    for (int64_t k = 0; k < W; ++k) match += __builtin_popcountll(A[k] & B[k]);                   \
+    /* genes of A at slots <= tb, of B at slots <= ta: whole words before, then a mask */         \
+    const int64_t a_upto = tb < 0 ? 0 : a.before[ra * W + tb / 64]                                \
+        + __builtin_popcountll(A[tb / 64] & (tb % 64 == 63 ? ~0ULL : (2ULL << (tb % 64)) - 1));   \
+    const int64_t b_upto = ta < 0 ? 0 : b.before[rb * W + ta / 64]                                \
+        + __builtin_popcountll(B[ta / 64] & (ta % 64 == 63 ? ~0ULL : (2ULL << (ta % 64)) - 1));   \
     const double na = (double)a.cnt[ra], nb = (double)b.cnt[rb];                                  \
     const double excess = (na - (double)a_upto) + (nb - (double)b_upto);                          \
     const double disjoint = na + nb - 2.0 * (double)match - excess;                               \
@@ -254,12 +270,12 @@ static inline double pair_dist_##SFX(genes_##SFX a, int64_t ra, genes_##SFX b, i
     return structure + coef[2] * w_mean + sigma;                                                  \
 }                                                                                                 \
 /* Distances between genome rows a[r, i] and b[r, j] (rows index the sets' flat arrays). */     \
-void distances_##SFX(const uint64_t *bits_a, const int64_t *cnt_a, const int64_t *top_a,         \
+void distances_##SFX(const uint64_t *bits_a, const int64_t *pre_a, const int64_t *cnt_a, const int64_t *top_a,\
                      const T *w_a, const T *sig_a, const int64_t *rows_a, int64_t Ka,            \
-                     const uint64_t *bits_b, const int64_t *cnt_b, const int64_t *top_b,         \
+                     const uint64_t *bits_b, const int64_t *pre_b, const int64_t *cnt_b, const int64_t *top_b,\
                      const T *w_b, const T *sig_b, const int64_t *rows_b, int64_t Kb,            \
                      int64_t R, int64_t NN, int64_t W, const double *coef, double *out, int threads) { \
-    const genes_##SFX a = {bits_a, cnt_a, top_a, w_a, sig_a}, b = {bits_b, cnt_b, top_b, w_b, sig_b}; \
+    const genes_##SFX a = {bits_a, pre_a, cnt_a, top_a, w_a, sig_a}, b = {bits_b, pre_b, cnt_b, top_b, w_b, sig_b};\
     _Pragma("omp parallel for schedule(static) num_threads(threads)")                            \
     for (int64_t q = 0; q < R * Ka; ++q) {                                                        \
         const int64_t r = q / Ka;                                                                 \
@@ -271,13 +287,15 @@ void distances_##SFX(const uint64_t *bits_a, const int64_t *cnt_a, const int64_t
    within thr, first slot on ties; the rest found species in genome order, each in the lowest \
    slot without members (slots >= S mean the caller must grow), and every genome still without \
    a species within thr of a founder joins it. founded[r, k]: run r's k-th new slot. */         \
-void assign_species_##SFX(const uint64_t *g_bits, const int64_t *g_cnt, const int64_t *g_top,   \
-                          const T *g_w, const T *g_sig, const uint64_t *r_bits, const int64_t *r_cnt,\
+void assign_species_##SFX(const uint64_t *g_bits, const int64_t *g_pre, const int64_t *g_cnt,     \
+                          const int64_t *g_top, const T *g_w, const T *g_sig, const uint64_t *r_bits, \
+                          const int64_t *r_pre, const int64_t *r_cnt,\
                           const int64_t *r_top, const T *r_w, const T *r_sig, const uint8_t *alive, \
                           int64_t R, int64_t P, int64_t S, int64_t NN, int64_t W, const double *coef,\
                           double thr, int64_t *species, int64_t *founded, int64_t *n_founded,     \
                           uint8_t *taken, int threads) {                                          \
-    const genes_##SFX g = {g_bits, g_cnt, g_top, g_w, g_sig}, rep = {r_bits, r_cnt, r_top, r_w, r_sig}; \
+    const genes_##SFX g = {g_bits, g_pre, g_cnt, g_top, g_w, g_sig};                              \
+    const genes_##SFX rep = {r_bits, r_pre, r_cnt, r_top, r_w, r_sig};\
     _Pragma("omp parallel for schedule(static) num_threads(threads)")                            \
     for (int64_t r = 0; r < R; ++r) {                                                             \
         int64_t *sp = species + r * P;                                                            \
@@ -314,8 +332,8 @@ void normals_check(uint64_t key, uint64_t c0, int64_t n, double *out) {
     for (int64_t k = 0; k < n; ++k) out[k] = normal_at(key, c0 + 2 * (uint64_t)k);
 }
 /* Gene bitsets, counts and highest occupied slot (-1: none) of rows conn[M, NN]. */
-void gene_bits(const uint8_t *conn, int64_t M, int64_t NN, int64_t W, uint64_t *bits, int64_t *count,
-               int64_t *top, int threads) {
+void gene_bits(const uint8_t *conn, int64_t M, int64_t NN, int64_t W, uint64_t *bits, int64_t *before,
+               int64_t *count, int64_t *top, int threads) {
     _Pragma("omp parallel for schedule(static) num_threads(threads)")
     for (int64_t m = 0; m < M; ++m) {
         const uint8_t *c = conn + m * NN;
@@ -323,13 +341,31 @@ void gene_bits(const uint8_t *conn, int64_t M, int64_t NN, int64_t W, uint64_t *
         int64_t n = 0, t = -1;
         for (int64_t k = 0; k < W; ++k) {
             uint64_t word = 0;
-            const int64_t hi = (k + 1) * 64 < NN ? (k + 1) * 64 : NN;
-            for (int64_t s = k * 64; s < hi; ++s) word |= (uint64_t)(c[s] != 0) << (s - k * 64);
+            const int64_t lo = k * 64, hi = lo + 64 < NN ? lo + 64 : NN;
+            int64_t s = lo;
+            for (; s + 8 <= hi; s += 8) { /* 8 bytes (0/1) to 8 bits */
+                uint64_t x; memcpy(&x, c + s, 8);
+                word |= (((x & 0x0101010101010101ULL) * 0x0102040810204080ULL) >> 56) << (s - lo);
+            }
+            for (; s < hi; ++s) word |= (uint64_t)(c[s] != 0) << (s - lo);
             b[k] = word;
+            before[m * W + k] = n;
             n += __builtin_popcountll(word);
             if (word) t = k * 64 + 63 - __builtin_clzll(word);
         }
         count[m] = n; top[m] = t;
+    }
+}
+/* Node slots touched by the genes of the living rows of conn[R * S, N, N]: out[R, N]. */
+void touched_nodes(const uint8_t *conn, const uint8_t *alive, int64_t R, int64_t S, int64_t N, uint8_t *out) {
+    memset(out, 0, R * N);
+    for (int64_t q = 0; q < R * S; ++q) {
+        if (!alive[q]) continue;
+        const uint8_t *c = conn + q * N * N;
+        uint8_t *o = out + (q / S) * N;
+        for (int64_t i = 0; i < N; ++i)
+            for (int64_t j = 0; j < N; ++j)
+                if (c[i * N + j]) { o[i] = 1; o[j] = 1; }
     }
 }
 """
@@ -352,21 +388,28 @@ def kernel_available() -> bool:
                 f = getattr(_lib, f"breed2_{sfx}")
                 f.restype, f.argtypes = None, [P] * 13 + [L] * 4 + [C] * 2 + [D] * 14 + [C]
                 f = getattr(_lib, f"distances_{sfx}")
-                f.restype, f.argtypes = None, [P] * 6 + [L] + [P] * 6 + [L] * 4 + [P, P, C]
+                f.restype, f.argtypes = None, [P] * 7 + [L] + [P] * 7 + [L] * 4 + [P, P, C]
                 f = getattr(_lib, f"assign_species_{sfx}")
-                f.restype, f.argtypes = None, [P] * 11 + [L] * 5 + [P, D] + [P] * 4 + [C]
+                f.restype, f.argtypes = None, [P] * 13 + [L] * 5 + [P, D] + [P] * 4 + [C]
             _lib.normals_check.restype = None
             _lib.normals_check.argtypes = [ctypes.c_uint64, ctypes.c_uint64, L, P]
             _lib.gene_bits.restype = None
-            _lib.gene_bits.argtypes = [P, L, L, L, P, P, P, C]
+            _lib.gene_bits.argtypes = [P, L, L, L, P, P, P, P, C]
+            _lib.touched_nodes.restype = None
+            _lib.touched_nodes.argtypes = [P, P, L, L, L, P]
             _lib._typed = True
     return _lib is not None
 
 
 def usable_for(g: Genomes) -> bool:
     """The kernels take CPU genomes of float32/float64 with at most ``MAX_NODES`` nodes."""
-    return (g.device.type == "cpu" and g.weight.dtype in (torch.float32, torch.float64)
-            and g.num_nodes <= MAX_NODES and kernel_available())
+    return usable_for_tensor(g.weight)
+
+
+def usable_for_tensor(t: Tensor) -> bool:
+    """``usable_for`` for a gene tensor ``[..., N, N]``."""
+    return (t.device.type == "cpu" and t.dtype in (torch.float32, torch.float64, torch.bool)
+            and t.shape[-1] <= MAX_NODES and kernel_available())
 
 
 def _sfx(dtype: torch.dtype) -> str:
@@ -435,10 +478,20 @@ class GeneBits:
         self.weight = weight.reshape(M, self.nn).contiguous()
         self.sigma = sigma.reshape(M).to(weight.dtype).contiguous()
         self.bits = torch.empty(M, self.words, dtype=torch.int64)
+        self.before = torch.empty(M, self.words, dtype=torch.int64)  # genes in the words before
         self.count = torch.empty(M, dtype=torch.int64)
         self.top = torch.empty(M, dtype=torch.int64)
-        _lib.gene_bits(c.data_ptr(), M, self.nn, self.words, self.bits.data_ptr(), self.count.data_ptr(),
-                       self.top.data_ptr(), torch.get_num_threads())
+        _lib.gene_bits(c.data_ptr(), M, self.nn, self.words, self.bits.data_ptr(), self.before.data_ptr(),
+                       self.count.data_ptr(), self.top.data_ptr(), torch.get_num_threads())
+
+
+def touched_nodes(conn: Tensor, alive: Tensor) -> Tensor:
+    """``[R, N]`` bool: node slots touched by a gene of a living row of ``conn[R, S, N, N]``."""
+    R, S, N = conn.shape[:3]
+    out = torch.empty(R, N, dtype=torch.bool)
+    c, a = conn.contiguous(), alive.contiguous()
+    _lib.touched_nodes(c.data_ptr(), a.data_ptr(), R, S, N, out.data_ptr())
+    return out
 
 
 def _coefficients(cfg: NEATConfig) -> Tensor:
@@ -448,7 +501,8 @@ def _coefficients(cfg: NEATConfig) -> Tensor:
 
 
 def _genes_args(g: GeneBits) -> list[int]:
-    return [g.bits.data_ptr(), g.count.data_ptr(), g.top.data_ptr(), g.weight.data_ptr(), g.sigma.data_ptr()]
+    return [g.bits.data_ptr(), g.before.data_ptr(), g.count.data_ptr(), g.top.data_ptr(), g.weight.data_ptr(),
+            g.sigma.data_ptr()]
 
 
 def gene_distances(a: GeneBits, rows_a: Tensor, b: GeneBits, rows_b: Tensor, cfg: NEATConfig) -> Tensor:

@@ -34,6 +34,7 @@ from evolution.reporters import BaseReporter
 from evolution.reproduce import ReproductionInfo, reproduce
 from evolution.rng import RunRNG
 from evolution.speciate import SpeciesState, empty_species, speciate
+from snn_torch._malloc import keep_freed_memory
 
 __all__ = ["NEAT", "NEATResult", "FitnessError"]
 
@@ -71,6 +72,7 @@ class NEAT:
                  dtype: torch.dtype = torch.float32) -> None:
         if not isinstance(config, NEATConfig):
             raise ConfigError(f"config must be a NEATConfig, got {type(config).__name__}")
+        keep_freed_memory()  # the children's tensors of each generation reuse the last ones' memory
         self.config = config
         self.rng = RunRNG([int(s) for s in seeds], device)
         self.dtype = dtype

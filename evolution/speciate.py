@@ -133,7 +133,7 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
     # The representatives: whole genome rows copied at once; slots without a species emptied.
     S = sp.capacity
     flat = (rep_index + runs.unsqueeze(1) * P).flatten()
-    reps = {k: v.flatten(0, 1).index_select(0, flat) for k, v in g.tensors().items()}
+    reps = {k: getattr(g, k).flatten(0, 1).index_select(0, flat) for k in ("conn", "weight", "sigma")}
     dead = torch.nonzero(~alive.flatten()).squeeze(1)
     for k in ("conn", "weight", "sigma"):
         reps[k][dead] = 0
