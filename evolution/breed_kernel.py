@@ -27,7 +27,6 @@ import torch
 from torch import Tensor
 
 from evolution.config import NEATConfig
-from evolution.innovation import assign_split_nodes
 from evolution.population import Genomes
 from evolution.rng import BOX_MULLER_C, COUNTER_RNG_C, RunRNG
 from snn_torch._cbuild import load_c_library
@@ -92,15 +91,14 @@ static inline int64_t pick_k(double u, int64_t n) {
 #define DEFINE_BREED(T, SFX)                                                                      \
 static inline T clampT_##SFX(T x, T lo, T hi) { x = x < lo ? lo : x; return x > hi ? hi : x; }   \
 /* Phase 1: crossover (or a copy of the first parent), then the add-node choice. */              \
-void breed1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_t *pn, const T *ps,\
+static inline void phase1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_t *pn, const T *ps,\
                   const int64_t *a_idx, const int64_t *b_idx, const uint8_t *do_cross,            \
                   const uint8_t *active, T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T *cs,     \
                   int64_t *src, int64_t *dst, uint8_t *request, const int64_t *keys,             \
                   const int64_t *base, const int64_t *blocks, int64_t R, int64_t P, int64_t N,   \
-                  double inherit_disabled, double node_add_prob, int threads) {                  \
+                  double inherit_disabled, double node_add_prob, int64_t row0, int64_t row1) {    \
     const int64_t NN = N * N;                                                                     \
-    _Pragma("omp parallel for schedule(static) num_threads(threads)")                            \
-    for (int64_t row = 0; row < R * P; ++row) {                                                   \
+    for (int64_t row = row0; row < row1; ++row) {                                                   \
         const int64_t r = row / P, p = row % P;                                                   \
         const uint64_t key = (uint64_t)keys[r], b0 = (uint64_t)base[r];                          \
         const int64_t a = a_idx[row], b = b_idx[row];                                             \
@@ -143,18 +141,17 @@ void breed1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8
     }                                                                                             \
 }                                                                                                 \
 /* Phase 2, in place: the granted splits, add-connection, weights, sigma, enabled flags. */     \
-void breed2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T *cs, const int64_t *new_node,  \
+static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T *cs, const int64_t *new_node,  \
                   const uint8_t *granted, const int64_t *src, const int64_t *dst,                 \
                   const uint8_t *active, const int64_t *keys, const int64_t *base,                \
                   const int64_t *blocks, int64_t R, int64_t P, int64_t N, int64_t first_output,   \
                   int feed_forward, int per_gene, double conn_add_prob, double w_mean,            \
                   double w_stdev, double w_min, double w_max, double w_rate, double w_rate_sum,   \
                   double w_replace, double w_power, double s_rate, double s_power, double s_min,  \
-                  double s_max, double toggle_rate, int threads) {                                \
+                  double s_max, double toggle_rate, int64_t row0, int64_t row1) {                 \
     const int64_t NN = N * N;                                                                     \
     const T mean = (T)w_mean, stdev = (T)w_stdev, lo = (T)w_min, hi = (T)w_max, power = (T)w_power;\
-    _Pragma("omp parallel for schedule(static) num_threads(threads)")                            \
-    for (int64_t row = 0; row < R * P; ++row) {                                                   \
+        for (int64_t row = row0; row < row1; ++row) {                                                   \
         const int64_t r = row / P, p = row % P;                                                   \
         const uint64_t key = (uint64_t)keys[r], b0 = (uint64_t)base[r];                          \
         T *w = cw + row * NN; uint8_t *c = cc + row * NN, *e = ce + row * NN, *nd = cn + row * N; \
@@ -233,6 +230,50 @@ void breed2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T *cs, const int
         _Pragma("omp simd")                                                                       \
         for (int64_t g = 0; g < n_genes; ++g) flip[g] = uniform01(key, c_t + genes[g]) < toggle_rate; \
         for (int64_t g = 0; g < n_genes; ++g) e[genes[g]] ^= flip[g];                             \
+    }                                                                                             \
+}                                                                                                 \
+/* One breeding step, a run at a time (its children stay in cache between the phases):            \
+   phase 1 for the run, its node registry (as evolution.innovation.assign_split_nodes:            \
+   distinct splits ranked in slot order take the free hidden slots in ascending order),           \
+   phase 2. */                                                                                    \
+void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_t *pn, const T *ps,\
+                 const int64_t *a_idx, const int64_t *b_idx, const uint8_t *do_cross,             \
+                 const uint8_t *active, T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T *cs,      \
+                 int64_t *src, int64_t *dst, uint8_t *request, const int64_t *keys,               \
+                 const int64_t *base, const int64_t *blocks, int64_t R, int64_t P, int64_t N,     \
+                 double inherit_disabled, double node_add_prob, int64_t *new_node, uint8_t *granted,\
+                 int64_t first_output, int feed_forward, int per_gene, double conn_add_prob,      \
+                 double w_mean, double w_stdev, double w_min, double w_max, double w_rate,        \
+                 double w_rate_sum, double w_replace, double w_power, double s_rate, double s_power,\
+                 double s_min, double s_max, double toggle_rate, const uint8_t *reserved,         \
+                 int64_t first_hidden, int threads) {                                             \
+    const int64_t NN = N * N, words = (NN + 63) / 64;                                             \
+    _Pragma("omp parallel for schedule(static) num_threads(threads)")                             \
+    for (int64_t r = 0; r < R; ++r) {                                                             \
+        const int64_t row0 = r * P, row1 = row0 + P;                                              \
+        phase1_##SFX(pw, pc, pe, pn, ps, a_idx, b_idx, do_cross, active, cw, cc, ce, cn, cs, src, dst,\
+                     request, keys, base, blocks, R, P, N, inherit_disabled, node_add_prob, row0, row1);\
+        uint8_t used[MAX_ROWS]; int64_t free_slots[MAX_ROWS], n_free = 0;                         \
+        for (int64_t j = 0; j < N; ++j) used[j] = reserved[r * N + j];                            \
+        for (int64_t row = row0; row < row1; ++row)                                               \
+            for (int64_t j = 0; j < N; ++j) used[j] |= cn[row * N + j];                           \
+        for (int64_t j = first_hidden; j < N; ++j) if (!used[j]) free_slots[n_free++] = j;        \
+        uint64_t wanted[MAX_SLOTS / 64] = {0};                                                    \
+        for (int64_t row = row0; row < row1; ++row)                                               \
+            if (request[row]) { const int64_t f = src[row] * N + dst[row]; wanted[f / 64] |= 1ULL << (f % 64); }\
+        int64_t before[MAX_SLOTS / 64], n = 0;                                                    \
+        for (int64_t k = 0; k < words; ++k) { before[k] = n; n += __builtin_popcountll(wanted[k]); }\
+        for (int64_t row = row0; row < row1; ++row) {                                             \
+            granted[row] = 0; new_node[row] = 0;                                                  \
+            if (!request[row]) continue;                                                          \
+            const int64_t f = src[row] * N + dst[row];                                            \
+            const int64_t k = before[f / 64] + __builtin_popcountll(wanted[f / 64] & ((1ULL << (f % 64)) - 1));\
+            if (k < n_free) { granted[row] = 1; new_node[row] = free_slots[k]; }                  \
+        }                                                                                         \
+        phase2_##SFX(cw, cc, ce, cn, cs, new_node, granted, src, dst, active, keys, base, blocks, R, P, N,\
+                     first_output, feed_forward, per_gene, conn_add_prob, w_mean, w_stdev, w_min, w_max,\
+                     w_rate, w_rate_sum, w_replace, w_power, s_rate, s_power, s_min, s_max, toggle_rate,\
+                     row0, row1);                                                                 \
     }                                                                                             \
 }                                                                                                 \
 typedef struct { const uint64_t *bits; const int64_t *before, *cnt, *top; const T *w, *sig; } genes_##SFX; \
@@ -383,10 +424,9 @@ def kernel_available() -> bool:
         if _lib is not None and not hasattr(_lib, "_typed"):
             P, L, D, C = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double, ctypes.c_int
             for sfx in ("f32", "f64"):
-                f = getattr(_lib, f"breed1_{sfx}")
-                f.restype, f.argtypes = None, [P] * 20 + [L] * 3 + [D] * 2 + [C]
-                f = getattr(_lib, f"breed2_{sfx}")
-                f.restype, f.argtypes = None, [P] * 13 + [L] * 4 + [C] * 2 + [D] * 14 + [C]
+                f = getattr(_lib, f"breed_{sfx}")
+                f.restype = None
+                f.argtypes = [P] * 20 + [L] * 3 + [D] * 2 + [P] * 2 + [L] + [C] * 2 + [D] * 14 + [P, L, C]
                 f = getattr(_lib, f"distances_{sfx}")
                 f.restype, f.argtypes = None, [P] * 7 + [L] + [P] * 7 + [L] * 4 + [P, P, C]
                 f = getattr(_lib, f"assign_species_{sfx}")
@@ -439,30 +479,25 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
     src = torch.empty(R, P, dtype=torch.int64)
     dst = torch.empty(R, P, dtype=torch.int64)
     request = torch.empty(R, P, dtype=torch.uint8)
-    getattr(_lib, f"breed1_{_sfx(T)}")(
+    new_node = torch.empty(R, P, dtype=torch.int64)
+    granted = torch.empty(R, P, dtype=torch.uint8)
+    reserved8 = (torch.zeros(R, N, dtype=torch.uint8) if reserved is None
+                 else reserved.to(torch.uint8).contiguous())
+    getattr(_lib, f"breed_{_sfx(T)}")(
         parents["weight"].data_ptr(), parents["conn"].data_ptr(), parents["enabled"].data_ptr(),
         parents["node"].data_ptr(), parents["sigma"].data_ptr(), a_idx.data_ptr(), b_idx.data_ptr(),
         cross.data_ptr(), act.data_ptr(), child.weight.data_ptr(), child.conn.data_ptr(),
         child.enabled.data_ptr(), child.node.data_ptr(), child.sigma.data_ptr(), src.data_ptr(),
         dst.data_ptr(), request.data_ptr(), keys.data_ptr(), base.data_ptr(), blocks.data_ptr(), R, P, N,
-        float(cfg.disabled_inherit_prob), float(cfg.node_add_prob), threads)
-    want = request.bool()
-    used = child.node.any(1)
-    if reserved is not None:
-        used = used | reserved
-    new_node, granted = assign_split_nodes(src, dst, want, used, cfg.first_hidden)
-    new_node, granted8 = new_node.contiguous(), granted.to(torch.uint8).contiguous()
-    getattr(_lib, f"breed2_{_sfx(T)}")(
-        child.weight.data_ptr(), child.conn.data_ptr(), child.enabled.data_ptr(), child.node.data_ptr(),
-        child.sigma.data_ptr(), new_node.data_ptr(), granted8.data_ptr(), src.data_ptr(), dst.data_ptr(),
-        act.data_ptr(), keys.data_ptr(), base.data_ptr(), blocks.data_ptr(), R, P, N, cfg.first_output,
-        int(cfg.feed_forward), int(cfg.weight_mutate_per_gene), float(cfg.conn_add_prob),
+        float(cfg.disabled_inherit_prob), float(cfg.node_add_prob), new_node.data_ptr(), granted.data_ptr(),
+        cfg.first_output, int(cfg.feed_forward), int(cfg.weight_mutate_per_gene), float(cfg.conn_add_prob),
         float(cfg.weight_init_mean), float(cfg.weight_init_stdev), float(cfg.weight_min_value),
         float(cfg.weight_max_value), float(cfg.weight_mutate_rate),
         float(cfg.weight_mutate_rate + cfg.weight_replace_rate), float(cfg.weight_replace_rate),
         float(cfg.weight_mutate_power), float(cfg.sigma_mutate_rate), float(cfg.sigma_mutate_power),
-        float(cfg.sigma_min_value), float(cfg.sigma_max_value), float(cfg.enabled_mutate_rate), threads)
-    return child, want & ~granted
+        float(cfg.sigma_min_value), float(cfg.sigma_max_value), float(cfg.enabled_mutate_rate),
+        reserved8.data_ptr(), cfg.first_hidden, threads)
+    return child, request.bool() & ~granted.bool()
 
 
 class GeneBits:
