@@ -457,25 +457,24 @@ def _sfx(dtype: torch.dtype) -> str:
 
 
 def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: Tensor, cfg: NEATConfig,
-          rng: RunRNG, reserved: Tensor | None) -> tuple[Genomes, Tensor]:
+          rng: RunRNG, reserved: Tensor | None, *, runs: Tensor | None = None) -> tuple[Genomes, Tensor]:
     """Children ``[R, P]`` of parents ``first`` / ``second`` (``[R, P]`` genome indices of
     ``g``; ``first`` is the fitter where ``do_cross``), mutated where ``active``: the same as
     ``crossover`` then ``mutate_add_node``, ``mutate_add_connection``, ``mutate_weights``,
     ``mutate_sigma`` and ``mutate_toggle_enabled``, and the same draws. Returns the children and
-    ``[R, P]`` bool: splits refused for want of a free node slot."""
-    R, P, N = g.num_runs, g.pop_size, g.num_nodes
+    ``[R, P]`` bool: splits refused for want of a free node slot. ``runs[R]``: the parents are
+    those runs of ``g`` (a larger population), read in place."""
+    (R, P), N = first.shape, g.num_nodes
     T = g.weight.dtype
     threads = torch.get_num_threads()
     starts, total = breed_blocks(P, N)
     base = rng.take(total)
     keys, blocks = rng.keys.contiguous(), torch.tensor(starts, dtype=torch.int64)
     parents = {k: v.contiguous() for k, v in g.tensors().items()}
-    rows = torch.arange(R).unsqueeze(1) * P
+    rows = (torch.arange(R) if runs is None else runs.to(torch.int64).cpu()).unsqueeze(1) * P
     a_idx, b_idx = (first + rows).contiguous(), (second + rows).contiguous()
     cross, act = do_cross.to(torch.uint8).contiguous(), active.to(torch.uint8).contiguous()
-    child = Genomes(torch.empty_like(parents["weight"]), torch.empty_like(parents["conn"]),
-                    torch.empty_like(parents["enabled"]), torch.empty_like(parents["node"]),
-                    torch.empty_like(parents["sigma"]))
+    child = Genomes(**{k: torch.empty((R, P, *t.shape[2:]), dtype=t.dtype) for k, t in parents.items()})
     src = torch.empty(R, P, dtype=torch.int64)
     dst = torch.empty(R, P, dtype=torch.int64)
     request = torch.empty(R, P, dtype=torch.uint8)

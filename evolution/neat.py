@@ -184,10 +184,11 @@ class NEAT:
         all_runs = len(evolving) == self.num_runs
         sub = (slice(None),) if all_runs else (torch.tensor(evolving, device=self.device),)
         rng = self.rng if all_runs else self.rng.subset(evolving)
-        g = self.genomes if all_runs else self.genomes.select_runs(sub[0])
         sp = self.species_state if all_runs else self.species_state.select_runs(sub[0])
-        children, _elite, sp, info = reproduce(g, fitness[sub], self.species[sub], sp, cfg, rng, self.generation,
-                                               fused=self.fused_breeding)
+        # The parents are read in place (``runs``), not copied out of the whole population.
+        children, _elite, sp, info = reproduce(self.genomes, fitness[sub], self.species[sub], sp, cfg, rng,
+                                               self.generation, fused=self.fused_breeding,
+                                               runs=None if all_runs else sub[0])
         if bool(info.extinct.any()):
             gone = torch.nonzero(info.extinct).flatten().tolist()
             fresh = initial_genomes(cfg, rng.subset(gone), dtype=self.dtype)

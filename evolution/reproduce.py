@@ -91,7 +91,7 @@ def allocate_offspring(fitness: Tensor, species: Tensor, survivors: Tensor, pop_
 
 
 def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cfg: NEATConfig,
-              rng: RunRNG, generation: int, *, fused: bool | None = None
+              rng: RunRNG, generation: int, *, fused: bool | None = None, runs: Tensor | None = None
               ) -> tuple[Genomes, Tensor, SpeciesState, ReproductionInfo]:
     """The next generation (before speciation).
 
@@ -99,6 +99,8 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
     went extinct get ``info.extinct``; their children are meaningless and the caller resets
     them. ``fused``: breed with the C kernel (``evolution.breed_kernel``, same result) or the
     tensor operators; by default the kernel wherever it can run (CPU, compiler present).
+    ``runs``: ``g`` is a larger population and the other arguments describe its runs ``runs``
+    (the kernel then reads those runs' parents in place).
     """
     R, P = fitness.shape
     dev = fitness.device
@@ -152,8 +154,10 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
     active = ~elite
     reserved = _rep_nodes(sp)
     if breed_kernel.usable_for(g) if fused is None else fused:
-        children, refused = breed_kernel.breed(g, first, second, do_cross, active, cfg, rng, reserved)
+        children, refused = breed_kernel.breed(g, first, second, do_cross, active, cfg, rng, reserved, runs=runs)
     else:
+        if runs is not None:
+            g = g.select_runs(runs)
         children = crossover(g.gather(first), g.gather(second), cfg, rng, do_cross)
         children, refused = mutate_add_node(children, cfg, rng, active, reserved=reserved)
         children = mutate_add_connection(children, cfg, rng, active)

@@ -42,8 +42,11 @@ def test_kernel_breeds_the_same_generations_as_the_tensor_operators(setting, dty
         neat = NEAT(cfg, seeds=[3, 11, 12], dtype=dtype)
         neat.fused_breeding = fused
         g = torch.Generator().manual_seed(7)
-        for _ in range(12):
-            neat.tell(torch.rand(3, cfg.pop_size, generator=g, dtype=torch.float64) * 16)
+        for k in range(12):
+            solved = torch.zeros(3, cfg.pop_size, dtype=torch.bool)
+            solved[1, 0] = k == 5  # run 1 freezes: later steps breed a subset of the runs
+            neat.tell(torch.rand(3, cfg.pop_size, generator=g, dtype=torch.float64) * 16, solved)
+        assert neat.solved_generation.tolist() == [-1, 6, -1]
         runs.append(neat)
     ref, fast = runs
     _equal_state(ref, fast)
