@@ -2,18 +2,23 @@
 
 The tensor operators (``crossover``, ``mutate_*``, ``distance``) are the readable reference:
 each touches every slot of every genome and draws a random number for every slot. These
-kernels compute the same step one child at a time, touching only the child's genes and
-evaluating only the draws it uses: a draw is addressed by its counter in the run's stream
-(``evolution.rng``), so skipping the unused ones changes nothing. Children are independent,
-so the result is the same with any thread count.
+kernels compute the same step a run at a time (threads share out the runs) and a child at a
+time within it, touching only the child's genes and evaluating only the draws it uses: a
+draw is addressed by its counter in the run's stream (``evolution.rng``), so skipping the
+unused ones changes nothing, and the result is the same with any thread count.
 
 - ``breed``: crossover, add-node (with the run's node registry in between), add-connection,
   weight, sigma and enabled mutations, in the reference's order and with its arithmetic
   (no contraction; float32 genomes round where torch rounds), and the same normals
   (``evolution.rng.box_muller``), so the children are the same bit for bit.
-- ``GeneBits`` / ``gene_distances``: excess, disjoint and weight terms from per-genome gene
-  bitsets (popcounts), summed in double. The reference sums the weight term another way
-  (``L1 - a_only - b_only``), so the two agree to about 1e-15.
+- ``assign_species``: ``speciate``'s rule (closest living representative within the
+  threshold, else found a species in genome order) from per-genome gene bitsets: excess,
+  disjoint and matching genes by popcounts, the weight term summed in double and skipped
+  once the other terms reach the bound. ``gene_distances`` gives the distances themselves.
+  The reference sums the weight term another way (``L1 - a_only - b_only``), so the two
+  agree to about 1e-15.
+- ``touched_nodes``: the node slots the living representatives use (the node registry's
+  reserved slots).
 
 ``SNN_NEAT_FUSED=0`` disables the kernels (``snn_torch._cbuild``).
 """
@@ -31,10 +36,11 @@ from evolution.population import Genomes
 from evolution.rng import BOX_MULLER_C, COUNTER_RNG_C, RunRNG
 from snn_torch._cbuild import load_c_library
 
-__all__ = ["kernel_available", "usable_for", "breed", "breed_blocks", "GeneBits", "gene_distances", "assign_species"]
+__all__ = ["kernel_available", "usable_for", "breed", "breed_blocks", "GeneBits", "gene_distances", "assign_species",
+           "touched_nodes"]
 
-# Draw blocks of one breeding step, in the reference's order: (name, draws per genome as a
-# multiple of N^2 and of 1, counters per draw). A block of shape [P, N, N] is "nn".
+# Draw blocks of one breeding step, in the reference's order (the C enum B_* lists them in the
+# same order): (name, "nn" for a [P, N, N] block or "p" for a [P] block, counters per draw).
 _BLOCKS = (
     ("from_other", "nn", 1), ("stays_disabled", "nn", 1), ("sigma_pick", "p", 1),  # crossover
     ("node_want", "p", 1), ("node_pick", "p", 1),  # mutate_add_node
@@ -456,6 +462,16 @@ def _sfx(dtype: torch.dtype) -> str:
     return "f32" if dtype == torch.float32 else "f64"
 
 
+def _require(conn: Tensor, weight: Tensor) -> None:
+    """Refuse, by name, what the kernels cannot take (asked for with ``fused=True``)."""
+    if not kernel_available():
+        raise RuntimeError("the C breeding kernels are unavailable (no compiler, or SNN_NEAT_FUSED=0); "
+                           "use fused=False")
+    if conn.device.type != "cpu" or weight.dtype not in (torch.float32, torch.float64) or conn.shape[-1] > MAX_NODES:
+        raise ValueError(f"the C breeding kernels take CPU float32/float64 genomes of at most {MAX_NODES} nodes, "
+                         f"got {weight.dtype} on {conn.device} with {conn.shape[-1]} nodes; use fused=False")
+
+
 def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: Tensor, cfg: NEATConfig,
           rng: RunRNG, reserved: Tensor | None, *, runs: Tensor | None = None) -> tuple[Genomes, Tensor]:
     """Children ``[R, P]`` of parents ``first`` / ``second`` (``[R, P]`` genome indices of
@@ -464,6 +480,7 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
     ``mutate_sigma`` and ``mutate_toggle_enabled``, and the same draws. Returns the children and
     ``[R, P]`` bool: splits refused for want of a free node slot. ``runs[R]``: the parents are
     those runs of ``g`` (a larger population), read in place."""
+    _require(g.conn, g.weight)
     (R, P), N = first.shape, g.num_nodes
     T = g.weight.dtype
     threads = torch.get_num_threads()
@@ -504,6 +521,7 @@ class GeneBits:
     weights and sigmas, for ``gene_distances``."""
 
     def __init__(self, conn: Tensor, weight: Tensor, sigma: Tensor) -> None:
+        _require(conn, weight)
         N = conn.shape[-1]
         self.nn = N * N
         self.words = (self.nn + 63) // 64

@@ -163,3 +163,18 @@ def test_stream_state_round_trips_and_rejects_bad_input():
         rng.set_state(torch.tensor([-1, 0]))
     with pytest.raises(ValueError, match="float32 or float64"):
         rng.rand(2, dtype=torch.float16)
+
+
+@needs_kernel
+def test_kernels_refuse_what_they_cannot_take():
+    cfg = small_config(max_hidden=70)  # 74 nodes: more than a 64-bit row of the adjacency
+    g, rng = population(cfg, seeds=(0,))
+    sp = empty_species(1, cfg.num_nodes, 2, device=g.device, dtype=g.weight.dtype)
+    with pytest.raises(ValueError, match="at most 64 nodes"):
+        speciate(g, sp, cfg, rng, 0, fused=True)
+    species, sp = speciate(g, sp, cfg, rng, 0)  # the default falls back to the tensor operators
+    assert (species >= 0).all()
+    half, _ = population(small_config(), seeds=(0,))
+    half.weight = half.weight.half()
+    with pytest.raises(ValueError, match="float32/float64"):
+        breed_kernel.GeneBits(half.conn, half.weight, half.sigma)
