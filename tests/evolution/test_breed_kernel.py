@@ -98,21 +98,38 @@ def test_kernel_distances_equal_the_reference():
     assert float(ref.std()) > 0.1  # genomes that differ
 
 
-def test_founders_never_take_a_slot_that_has_members():
-    # Genome 0 joins the species in slot 0; genomes 1 and 2 match nothing and are last in
-    # genome order. A scatter of flags once let their clamped -1 mark slot 0 free, so a new
-    # species merged into slot 0.
+def _slot0_case():
+    # Genome 0 joins the species in slot 0; genomes 1 to 5 match nothing and come later in
+    # genome order.
     cfg = small_config(compatibility_threshold=0.5)
-    g, rng = population(cfg, seeds=(0,))
+    g, _ = population(cfg, seeds=(0,))
     g.weight[0, 1:] = torch.where(g.conn[0, 1:], 8.0, 0.0)  # far from genome 0 in weight
     sp = empty_species(1, cfg.num_nodes, 2, device=g.device, dtype=g.weight.dtype)
     sp.alive[0, 0] = True
     sp.rep_conn[0, 0], sp.rep_weight[0, 0], sp.rep_sigma[0, 0] = g.conn[0, 0], g.weight[0, 0], g.sigma[0, 0]
+    return cfg, g, sp
+
+
+def test_founders_never_take_a_slot_that_has_members():
+    # A scatter of flags once let the unassigned genomes' clamped -1 mark slot 0 free, so a
+    # new species merged into slot 0.
+    cfg, g, sp = _slot0_case()
     for fused in [False] + ([True] if breed_kernel.kernel_available() else []):
         state = SpeciesState(**{k: v.clone() for k, v in sp.tensors().items()})
         species, _ = speciate(g, state, cfg, RunRNG([0]), 1, fused=fused)
         assert species[0, 0] == 0
         assert (species[0, 1:] != 0).all(), fused
+
+
+def test_the_slot0_check_puts_the_old_rule_back(monkeypatch):
+    # tasks.experiments.slot0_bug_check is only meaningful if its rule shows the old bug.
+    import evolution.speciate as speciate_module
+    from tasks.experiments.slot0_bug_check import _free_slot_before_the_fix
+
+    monkeypatch.setattr(speciate_module, "_free_slot", _free_slot_before_the_fix)
+    cfg, g, sp = _slot0_case()
+    species, _ = speciate(g, sp, cfg, RunRNG([0]), 1, fused=False)
+    assert species[0, 0] == 0 and (species[0, 1:] == 0).any()
 
 
 def test_box_muller_is_accurate_and_normal():
