@@ -447,15 +447,22 @@ def kernel_available() -> bool:
     return _lib is not None
 
 
+def _unsupported(conn: Tensor, weight: Tensor) -> str | None:
+    """Why the kernels cannot take these genes, or None if they can."""
+    if conn.device.type != "cpu" or weight.dtype not in (torch.float32, torch.float64) or conn.shape[-1] > MAX_NODES:
+        return (f"the C breeding kernels take CPU float32/float64 genomes of at most {MAX_NODES} nodes, "
+                f"got {weight.dtype} on {conn.device} with {conn.shape[-1]} nodes")
+    return None
+
+
 def usable_for(g: Genomes) -> bool:
     """The kernels take CPU genomes of float32/float64 with at most ``MAX_NODES`` nodes."""
-    return usable_for_tensor(g.weight)
+    return _unsupported(g.conn, g.weight) is None and kernel_available()
 
 
-def usable_for_tensor(t: Tensor) -> bool:
-    """``usable_for`` for a gene tensor ``[..., N, N]``."""
-    return (t.device.type == "cpu" and t.dtype in (torch.float32, torch.float64, torch.bool)
-            and t.shape[-1] <= MAX_NODES and kernel_available())
+def usable_for_species(sp_conn: Tensor, sp_weight: Tensor) -> bool:
+    """``usable_for`` for species representatives ``[R, S, N, N]``."""
+    return _unsupported(sp_conn, sp_weight) is None and kernel_available()
 
 
 def _sfx(dtype: torch.dtype) -> str:
@@ -467,9 +474,9 @@ def _require(conn: Tensor, weight: Tensor) -> None:
     if not kernel_available():
         raise RuntimeError("the C breeding kernels are unavailable (no compiler, or SNN_NEAT_FUSED=0); "
                            "use fused=False")
-    if conn.device.type != "cpu" or weight.dtype not in (torch.float32, torch.float64) or conn.shape[-1] > MAX_NODES:
-        raise ValueError(f"the C breeding kernels take CPU float32/float64 genomes of at most {MAX_NODES} nodes, "
-                         f"got {weight.dtype} on {conn.device} with {conn.shape[-1]} nodes; use fused=False")
+    reason = _unsupported(conn, weight)
+    if reason is not None:
+        raise ValueError(f"{reason}; use fused=False")
 
 
 def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: Tensor, cfg: NEATConfig,

@@ -176,7 +176,7 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
 
 def _rep_nodes(sp: SpeciesState) -> Tensor:
     """Node slots touched by any living representative's genes, ``[R, N]``."""
-    if breed_kernel.usable_for_tensor(sp.rep_conn):
+    if breed_kernel.usable_for_species(sp.rep_conn, sp.rep_weight):
         return breed_kernel.touched_nodes(sp.rep_conn, sp.alive)
     R, S, N = sp.rep_conn.shape[:3]
     live = torch.nonzero(sp.alive.flatten()).squeeze(1)

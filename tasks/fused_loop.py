@@ -190,6 +190,12 @@ static inline int64_t next_row(int64_t *next, int64_t rows) {
     for (int64_t j = 0; j < np; ++j) hk[(t[k] % window) * np + j] = cnt[k * np + j];           \
     T denom = (T)((double)(t[k] + 1 < window ? t[k] + 1 : window) * (double)window_s);
 
+/* Each thread's lane state of the spiking loops: v, u, spikes, input current, spike counts of
+   the control step, and the rate window's history (up to 16 control steps). */
+#define SPIKING_LANE_BUFFERS(T)                                                                \
+    T vv[LANES * MAXN], uu[LANES * MAXN], zz[LANES * MAXN], I[LANES * MAXN];                   \
+    T cnt[LANES * MAXN], hist[LANES * 16 * MAXN];
+
 /* status[r]: 0 ok, 1 the plant produced NaN or inf. */
 #define DEFINE_SNN_LOOP(NAME, LSUB, PLANT, T, EXP, SUFFIX)                                     \
 void NAME(const T *w, const T *wout, const T *sigma, const T *state0, int64_t *steps,         \
@@ -199,8 +205,7 @@ void NAME(const T *w, const T *wout, const T *sigma, const T *state0, int64_t *s
     int64_t next = 0;                                                                          \
     _Pragma("omp parallel num_threads(threads)")                                               \
     {                                                                                          \
-        T vv[LANES * MAXN], uu[LANES * MAXN], zz[LANES * MAXN], I[LANES * MAXN];              \
-        T cnt[LANES * MAXN], hist[LANES * 16 * MAXN];                                          \
+        SPIKING_LANE_BUFFERS(T)                                                                \
         LANES_INIT(T)                                                                          \
         for (int k = 0; k < LANES; ++k) { SPIKING_START(T) }                                   \
         for (;;) {                                                                             \
@@ -364,8 +369,7 @@ void NAME(const T *w, const T *wout, const T *rest, const uint64_t *keys, const 
     int64_t next = 0;                                                                          \
     _Pragma("omp parallel num_threads(threads)")                                               \
     {                                                                                          \
-        T vv[LANES * MAXN], uu[LANES * MAXN], zz[LANES * MAXN], I[LANES * MAXN];              \
-        T cnt[LANES * MAXN], hist[LANES * 16 * MAXN];                                          \
+        SPIKING_LANE_BUFFERS(T)                                                                \
         uint64_t counter[LANES];                                                               \
         const int64_t draws = substeps * n_in; /* input spikes per control step */             \
         T *spikes = (T *)malloc(LANES * draws * sizeof(T));                                    \
