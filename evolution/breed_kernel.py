@@ -174,15 +174,21 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
         int64_t n_genes = set_slots(c, NN, genes);                                                \
         if (uniform01(key, b0 + blocks[B_CONN_WANT] + p) < conn_add_prob) {                       \
             /* rows as bitsets: out[i] = genes i -> j; into[j] = i with a path i -> j (closure) */\
-            uint64_t out[MAX_ROWS] = {0}, into[MAX_ROWS] = {0}, nodes = 0;                        \
+            uint64_t out[MAX_ROWS] = {0}, into[MAX_ROWS] = {0}, nodes = 0, ends = 0;              \
             for (int64_t j = 0; j < N; ++j) nodes |= (uint64_t)(nd[j] != 0) << j;                 \
             for (int64_t g = 0; g < n_genes; ++g) {                                               \
                 const int64_t i = genes[g] / N, j = genes[g] % N;                                 \
-                out[i] |= 1ULL << j; into[j] |= 1ULL << i;                                        \
+                out[i] |= 1ULL << j; into[j] |= 1ULL << i; ends |= 1ULL << i | 1ULL << j;         \
             }                                                                                     \
-            if (feed_forward)                                                                     \
-                for (int64_t k = 0; k < N; ++k)                                                   \
-                    for (int64_t j = 0; j < N; ++j) if (into[j] >> k & 1) into[j] |= into[k];     \
+            if (feed_forward) /* Warshall over the genes' end nodes only (the rest have no path) */\
+                for (uint64_t ks = ends; ks; ks &= ks - 1) {                                      \
+                    const int64_t k = __builtin_ctzll(ks);                                        \
+                    const uint64_t via = into[k];                                                 \
+                    for (uint64_t js = ends; js; js &= js - 1) {                                  \
+                        const int64_t j = __builtin_ctzll(js);                                    \
+                        into[j] |= via & (0 - (into[j] >> k & 1));                                \
+                    }                                                                             \
+                }                                                                                 \
             const uint64_t targets = nodes & ~((1ULL << first_output) - 1); /* not into inputs */ \
             uint64_t cand[MAX_ROWS];                                                              \
             int64_t n = 0;                                                                        \

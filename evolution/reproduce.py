@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from evolution import breed_kernel
+from evolution import breed_kernel, select_kernel
 from evolution.config import NEATConfig
 from evolution.crossover import crossover
 from evolution.mutate import (
@@ -30,7 +30,7 @@ from evolution.population import Genomes
 from evolution.rng import RunRNG
 from evolution.speciate import SpeciesState
 
-__all__ = ["ReproductionInfo", "allocate_offspring", "reproduce", "update_stagnation"]
+__all__ = ["ReproductionInfo", "allocate_offspring", "reproduce", "select_parents", "update_stagnation"]
 
 
 @dataclass
@@ -102,12 +102,47 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
     ``runs``: ``g`` is a larger population and the other arguments describe its runs ``runs``
     (the kernel then reads those runs' parents in place).
     """
-    R, P = fitness.shape
-    dev = fitness.device
+    P = fitness.shape[1]
     sp, survivors, _ = update_stagnation(fitness, species, sp, cfg, generation)
-    S = sp.capacity
     counts = allocate_offspring(fitness, species, survivors, P)
+    use_kernels = breed_kernel.usable_for(g) if fused is None else fused
 
+    if use_kernels and select_kernel.kernel_available():
+        first, second, do_cross, elite = select_kernel.select_parents(
+            fitness, species, survivors, counts, cfg, rng)
+    else:
+        first, second, do_cross, elite = select_parents(fitness, species, survivors, counts, cfg, rng)
+    active = ~elite
+    reserved = _rep_nodes(sp)
+    if use_kernels:
+        children, refused = breed_kernel.breed(g, first, second, do_cross, active, cfg, rng, reserved, runs=runs)
+    else:
+        if runs is not None:
+            g = g.select_runs(runs)
+        children = crossover(g.gather(first), g.gather(second), cfg, rng, do_cross)
+        children, refused = mutate_add_node(children, cfg, rng, active, reserved=reserved)
+        children = mutate_add_connection(children, cfg, rng, active)
+        children = mutate_weights(children, cfg, rng, active)
+        children = mutate_sigma(children, cfg, rng, active)
+        children = mutate_toggle_enabled(children, cfg, rng, active)
+
+    info = ReproductionInfo(
+        extinct=~survivors.any(1),
+        stagnant_removed=(sp.alive & ~survivors).sum(1),
+        split_refused=refused.sum(1),
+        offspring=counts,
+    )
+    return children, elite, sp, info
+
+
+def select_parents(fitness: Tensor, species: Tensor, survivors: Tensor, counts: Tensor, cfg: NEATConfig,
+                   rng: RunRNG) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Parents of every child, as tensor operations (``evolution.select_kernel`` computes the
+    same in C). Returns ``(first, second, do_cross, elite)``, all ``[R, P]``: ``first`` is the
+    fitter parent where ``do_cross``; elites are copied unchanged."""
+    R, P = fitness.shape
+    S = survivors.shape[1]
+    dev = fitness.device
     # Members sorted by (species, fitness descending); dead species' members last.
     key_species = torch.where(torch.gather(survivors, 1, species), species, S)
     by_fit = torch.argsort(fitness, dim=1, descending=True, stable=True)
@@ -151,27 +186,7 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
     fitter = torch.where(f2 > f1, p2, p1)
     other = torch.where(f2 > f1, p1, p2)
     first, second = torch.where(do_cross, fitter, p1), torch.where(do_cross, other, p1)
-    active = ~elite
-    reserved = _rep_nodes(sp)
-    if breed_kernel.usable_for(g) if fused is None else fused:
-        children, refused = breed_kernel.breed(g, first, second, do_cross, active, cfg, rng, reserved, runs=runs)
-    else:
-        if runs is not None:
-            g = g.select_runs(runs)
-        children = crossover(g.gather(first), g.gather(second), cfg, rng, do_cross)
-        children, refused = mutate_add_node(children, cfg, rng, active, reserved=reserved)
-        children = mutate_add_connection(children, cfg, rng, active)
-        children = mutate_weights(children, cfg, rng, active)
-        children = mutate_sigma(children, cfg, rng, active)
-        children = mutate_toggle_enabled(children, cfg, rng, active)
-
-    info = ReproductionInfo(
-        extinct=~survivors.any(1),
-        stagnant_removed=(sp.alive & ~survivors).sum(1),
-        split_refused=refused.sum(1),
-        offspring=counts,
-    )
-    return children, elite, sp, info
+    return first, second, do_cross, elite
 
 
 def _rep_nodes(sp: SpeciesState) -> Tensor:

@@ -14,7 +14,7 @@ from dataclasses import dataclass, fields
 import torch
 from torch import Tensor
 
-from evolution import breed_kernel
+from evolution import breed_kernel, select_kernel
 from evolution.config import NEATConfig
 from evolution.distance import distance, gene_stats
 from evolution.population import Genomes
@@ -110,19 +110,27 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
              fused: bool | None = None) -> tuple[Tensor, SpeciesState]:
     """Assign every genome a species slot; returns ``(species [R, P] long, new state)``.
 
-    ``fused``: assign by the C kernel (``evolution.breed_kernel.assign_species``, the same
-    rule; distances agree to about 1e-15) or by the tensor reference below; by default the
-    kernel wherever it can run."""
+    ``fused``: assign by the C kernels (``evolution.breed_kernel.assign_species``, the same
+    rule, distances agreeing to about 1e-15; ``evolution.select_kernel`` for the
+    representatives) or by the tensor reference below; by default the kernels wherever they
+    can run."""
     R, P = g.num_runs, g.pop_size
     dev = g.device
     runs = torch.arange(R, device=dev)
     # Pure: never edit the input (the representatives are only read, so they are not copied).
     sp = SpeciesState(**{k: v if k.startswith("rep_") else v.clone() for k, v in sp.tensors().items()})
-    if breed_kernel.usable_for(g) if fused is None else fused:
+    use_kernels = breed_kernel.usable_for(g) if fused is None else fused
+    if use_kernels:
         species, sp = _assign_by_kernel(g, sp, cfg, generation)
     else:
         species, sp = _assign_by_tensors(g, sp, cfg, generation)
     # Species without members die; each survivor takes a random member as representative.
+    if use_kernels and select_kernel.kernel_available():
+        alive, rep_conn, rep_weight, rep_sigma = select_kernel.choose_representatives(g, species, sp.capacity, rng)
+        return species, SpeciesState(alive=alive, rep_conn=rep_conn, rep_weight=rep_weight, rep_sigma=rep_sigma,
+                                     best_fitness=torch.where(alive, sp.best_fitness, -torch.inf),
+                                     last_improved=sp.last_improved, created=sp.created, ident=sp.ident,
+                                     next_id=sp.next_id)
     counts = torch.zeros(R, sp.capacity, dtype=torch.long, device=dev)
     counts.scatter_add_(1, species, torch.ones_like(species))
     alive = counts > 0

@@ -9,10 +9,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from evolution import breed_kernel
+from evolution import breed_kernel, select_kernel
 from evolution.distance import distance, gene_stats
 from evolution.neat import NEAT
-from evolution.reproduce import reproduce
+from evolution.reproduce import allocate_offspring, reproduce, select_parents, update_stagnation
 from evolution.rng import RunRNG, _cos_2pi, _log_unit, _sqrt, box_muller
 from evolution.speciate import SpeciesState, empty_species, speciate
 from tasks.experiments.cartpole import controller_config
@@ -81,6 +81,34 @@ def test_kernel_matches_reference_on_small_populations(seed, feed_forward, node_
     assert torch.equal(s0, s1) and torch.equal(r0, r1) and torch.equal(o0, o1)
     for name, t in sp0.tensors().items():
         assert torch.equal(t, getattr(sp1, name)), name
+
+
+@needs_kernel
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), pop=st.integers(2, 60), slots=st.integers(1, 9),
+       survival=st.sampled_from([0.05, 0.1, 0.15, 0.2, 0.3, 0.7, 1.0]), elitism=st.integers(0, 3),
+       elitism_min=st.integers(1, 6), tied=st.booleans())
+def test_selection_kernel_equals_the_tensor_selection(seed, pop, slots, survival, elitism, elitism_min, tied):
+    # Small species, dead and stagnant slots, tied fitness values (ties go by index) and
+    # survival thresholds whose float32 product with the size is rounded (0.3 * 10).
+    cfg = dataclasses.replace(small_config(pop_size=pop), survival_threshold=survival, elitism=elitism,
+                              elitism_min_species_size=elitism_min, interspecies_crossover_prob=0.3)
+    g = torch.Generator().manual_seed(seed)
+    R = 3
+    species = torch.randint(0, slots, (R, pop), generator=g)
+    fitness = torch.randint(0, 4, (R, pop), generator=g).double() if tied else torch.rand(R, pop, generator=g,
+                                                                                            dtype=torch.float64)
+    sp = empty_species(R, 2, slots, device=torch.device("cpu"), dtype=torch.float32)
+    sp.alive.scatter_(1, species, True)  # the slots with members live ...
+    sp.last_improved[:] = torch.randint(-30, 1, (R, slots), generator=g)  # ... some of them stagnant
+    _, survivors, _ = update_stagnation(fitness, species, sp, cfg, 0)
+    counts = allocate_offspring(fitness, species, survivors, pop)
+    out = []
+    for select in (select_parents, select_kernel.select_parents):
+        rng = RunRNG([seed, seed + 1, seed + 2])
+        out.append((*select(fitness, species, survivors, counts, cfg, rng), rng.offsets))
+    for name, a, b in zip(["first", "second", "do_cross", "elite", "offsets"], *out, strict=True):
+        assert torch.equal(a, b), name
 
 
 @needs_kernel

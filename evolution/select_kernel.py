@@ -1,0 +1,224 @@
+"""Parent selection and the choice of representatives as C kernels (CPU).
+
+``evolution.reproduce`` selects parents and ``evolution.speciate`` chooses each species'
+representative with about a hundred small tensor operations over ``[R, P]`` (sorts, gathers,
+searches, scatters): the readable reference, and the CUDA path. On the CPU their per-op
+overhead made them a third of a generation's GA work, so these kernels do the same a run at
+a time (threads share out the runs), with the same draws (addressed by counter,
+``evolution.rng``) and the same arithmetic, so the results are the same bit for bit.
+
+- ``select_parents``: members sorted by (species, fitness descending, index), the elites,
+  the two parents of each child (within the species, or the second from any species' parents
+  for interspecies mating), the crossover decision.
+- ``choose_representatives``: each species' member with the highest score (the last such
+  member on an exact tie, as the reference's scatter), its genes copied as whole rows; slots
+  without members emptied.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import threading
+
+import torch
+from torch import Tensor
+
+from evolution.config import NEATConfig
+from evolution.population import Genomes
+from evolution.rng import COUNTER_RNG_C, RunRNG
+from snn_torch._cbuild import load_c_library
+
+__all__ = ["kernel_available", "select_parents", "choose_representatives", "SELECTION_DRAWS"]
+
+SELECTION_DRAWS = 5  # float64 uniform blocks of P per run: p1, p2, any parent, interspecies, crossover
+
+_SOURCE = r"""
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+#include <math.h>
+""" + COUNTER_RNG_C + r"""
+/* idx[0..n) sorted by f descending, ties in index order (a stable merge sort). */
+static void sort_by_fitness(const double *f, int64_t n, int64_t *idx, int64_t *tmp) {
+    for (int64_t p = 0; p < n; ++p) idx[p] = p;
+    for (int64_t width = 1; width < n; width *= 2) {
+        for (int64_t lo = 0; lo < n; lo += 2 * width) {
+            const int64_t mid = lo + width < n ? lo + width : n, hi = lo + 2 * width < n ? lo + 2 * width : n;
+            int64_t i = lo, j = mid, k = lo;
+            while (i < mid && j < hi) tmp[k++] = f[idx[j]] > f[idx[i]] ? idx[j++] : idx[i++];
+            while (i < mid) tmp[k++] = idx[i++];
+            while (j < hi) tmp[k++] = idx[j++];
+        }
+        memcpy(idx, tmp, n * sizeof(int64_t));
+    }
+}
+static inline int64_t pick_rank(double u, int64_t n) { /* (u * n).long().clamp_max(n - 1).clamp_min(0) */
+    int64_t k = (int64_t)(u * (double)n);
+    k = k > n - 1 ? n - 1 : k;
+    return k < 0 ? 0 : k;
+}
+/* reproduce's selection, run by run. survivors[R, S], counts[R, S] (offspring per slot). */
+void select_parents(const double *fitness, const int64_t *species, const uint8_t *survivors,
+                    const int64_t *counts, const int64_t *keys, const int64_t *base, int64_t R, int64_t P,
+                    int64_t S, float survival, int64_t elitism, int64_t elitism_min, double inter_prob,
+                    double cross_prob, int64_t *first, int64_t *second, uint8_t *do_cross, uint8_t *elite,
+                    int threads) {
+    _Pragma("omp parallel for schedule(static) num_threads(threads)")
+    for (int64_t r = 0; r < R; ++r) {
+        const double *f = fitness + r * P;
+        const int64_t *sp = species + r * P, *cnt = counts + r * S;
+        const uint8_t *sv = survivors + r * S;
+        const uint64_t key = (uint64_t)keys[r], b0 = (uint64_t)base[r];
+        int64_t *buf = malloc((5 * P + 4 * (S + 1)) * sizeof(int64_t));
+        int64_t *kspecies = buf, *by_fit = buf + P, *order = buf + 2 * P, *tmp = buf + 3 * P, *parents = buf + 4 * P;
+        int64_t *size = buf + 5 * P, *start = size + (S + 1), *npar = start + (S + 1), *fill = npar + (S + 1);
+        for (int64_t p = 0; p < P; ++p) kspecies[p] = sv[sp[p]] ? sp[p] : S; /* dead species' members last */
+        sort_by_fitness(f, P, by_fit, tmp);
+        memset(size, 0, (S + 1) * sizeof(int64_t));
+        for (int64_t p = 0; p < P; ++p) ++size[kspecies[p]];
+        int64_t at = 0;
+        for (int64_t s = 0; s <= S; ++s) { fill[s] = at; at += size[s]; }
+        for (int64_t q = 0; q < P; ++q) { const int64_t g = by_fit[q]; order[fill[kspecies[g]]++] = g; }
+        at = 0;
+        for (int64_t s = 0; s < S; ++s) {
+            start[s] = at; at += size[s];
+            /* torch.ceil(survival * size): float32 arithmetic (a long tensor times a Python float) */
+            const int64_t n = (int64_t)ceilf((float)size[s] * survival);
+            npar[s] = size[s] > 0 ? (n < 1 ? 1 : n) : 0;
+        }
+        start[S] = 0; npar[S] = 0;
+        int64_t n_parents = 0; /* every species' parents, in sorted order, for interspecies mating */
+        for (int64_t q = 0; q < P; ++q) {
+            const int64_t s = kspecies[order[q]];
+            if (q - start[s] < npar[s]) parents[n_parents++] = q;
+        }
+        const int64_t n_all = n_parents > 0 ? n_parents : 1;
+        int64_t os = 0, end = S > 0 ? cnt[0] : 0;
+        for (int64_t k = 0; k < P; ++k) {
+            while (os < S - 1 && end <= k) end += cnt[++os]; /* searchsorted(ends, k, right), clamped */
+            const int64_t pos = k - (end - cnt[os]), o_start = start[os], o_size = size[os], o_par = npar[os];
+            const int64_t row = r * P + k;
+            const int is_elite = pos < elitism && pos < o_size && o_size >= elitism_min;
+            const double u1 = uniform01(key, b0 + k), u2 = uniform01(key, b0 + P + k);
+            const double u3 = uniform01(key, b0 + 2 * P + k), u4 = uniform01(key, b0 + 3 * P + k);
+            const double u5 = uniform01(key, b0 + 4 * P + k);
+            const int64_t p1 = is_elite ? order[o_start + pos] : order[o_start + pick_rank(u1, o_par)];
+            int64_t p2 = order[o_start + pick_rank(u2, o_par)];
+            int64_t pick = (int64_t)(u3 * (double)n_all);
+            pick = pick > n_all - 1 ? n_all - 1 : pick;
+            const int64_t any_parent = order[n_parents > 0 ? parents[pick] : P - 1];
+            if (u4 < inter_prob) p2 = any_parent;
+            const int cross = !is_elite && u5 < cross_prob && p1 != p2;
+            const int second_fitter = f[p2] > f[p1];
+            first[row] = cross && second_fitter ? p2 : p1;
+            second[row] = cross ? (second_fitter ? p1 : p2) : p1;
+            do_cross[row] = (uint8_t)cross; elite[row] = (uint8_t)is_elite;
+        }
+        free(buf);
+    }
+}
+/* speciate's representatives: per species slot, the member with the highest score (the last on
+   a tie), its conn/weight/sigma rows copied; slots without members zeroed. */
+#define DEFINE_REPS(T, SFX)                                                                       \
+void choose_representatives_##SFX(const int64_t *species, const uint8_t *conn, const T *weight,  \
+                                  const T *sigma, const int64_t *keys, const int64_t *base,        \
+                                  int64_t R, int64_t P, int64_t S, int64_t NN, uint8_t *alive,     \
+                                  uint8_t *rep_conn, T *rep_weight, T *rep_sigma, int threads) {   \
+    _Pragma("omp parallel for schedule(static) num_threads(threads)")                             \
+    for (int64_t r = 0; r < R; ++r) {                                                             \
+        const uint64_t key = (uint64_t)keys[r], b0 = (uint64_t)base[r];                          \
+        double *best = malloc(S * sizeof(double)); int64_t *rep = malloc(S * sizeof(int64_t));   \
+        for (int64_t s = 0; s < S; ++s) { best[s] = -1.0; rep[s] = -1; }                          \
+        for (int64_t p = 0; p < P; ++p) {                                                         \
+            const int64_t s = species[r * P + p];                                                 \
+            const double u = uniform01(key, b0 + p);                                              \
+            if (u >= best[s]) { best[s] = u; rep[s] = p; }                                        \
+        }                                                                                         \
+        for (int64_t s = 0; s < S; ++s) {                                                         \
+            const int64_t q = r * S + s, g = r * P + rep[s];                                      \
+            alive[q] = rep[s] >= 0;                                                               \
+            if (rep[s] >= 0) {                                                                    \
+                memcpy(rep_conn + q * NN, conn + g * NN, NN);                                     \
+                memcpy(rep_weight + q * NN, weight + g * NN, NN * sizeof(T));                     \
+                rep_sigma[q] = sigma[g];                                                          \
+            } else {                                                                              \
+                memset(rep_conn + q * NN, 0, NN); memset(rep_weight + q * NN, 0, NN * sizeof(T)); \
+                rep_sigma[q] = (T)0;                                                              \
+            }                                                                                     \
+        }                                                                                         \
+        free(best); free(rep);                                                                    \
+    }                                                                                             \
+}
+DEFINE_REPS(float, f32)
+DEFINE_REPS(double, f64)
+"""
+
+_lib: ctypes.CDLL | None = None
+_lock = threading.Lock()
+
+
+def kernel_available() -> bool:
+    """True if the selection kernels compiled (once per process) and are enabled."""
+    global _lib
+    with _lock:
+        _lib = load_c_library("neat_select", _SOURCE)
+        if _lib is not None and not hasattr(_lib, "_typed"):
+            P, L, D, F, C = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double, ctypes.c_float, ctypes.c_int
+            _lib.select_parents.restype = None
+            _lib.select_parents.argtypes = [P] * 6 + [L] * 3 + [F, L, L, D, D] + [P] * 4 + [C]
+            for sfx in ("f32", "f64"):
+                f = getattr(_lib, f"choose_representatives_{sfx}")
+                f.restype, f.argtypes = None, [P] * 6 + [L] * 4 + [P] * 4 + [C]
+            _lib._typed = True
+    return _lib is not None
+
+
+def _require() -> None:
+    if not kernel_available():
+        raise RuntimeError("the C selection kernels are unavailable (no compiler, or SNN_NEAT_FUSED=0); "
+                           "use fused=False")
+
+
+def select_parents(fitness: Tensor, species: Tensor, survivors: Tensor, counts: Tensor, cfg: NEATConfig,
+                   rng: RunRNG) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """``reproduce``'s selection for ``fitness[R, P]`` (float64), ``species[R, P]``,
+    ``survivors[R, S]`` and ``counts[R, S]`` (offspring per slot); takes ``SELECTION_DRAWS``
+    blocks of ``P`` counters per run. Returns ``(first, second, do_cross, elite)``, all
+    ``[R, P]``: the parents (``first`` the fitter where ``do_cross``), whether to cross, and
+    the elites (copied unchanged)."""
+    _require()
+    R, P = fitness.shape
+    S = survivors.shape[1]
+    base = rng.take(SELECTION_DRAWS * P)
+    first, second = torch.empty(R, P, dtype=torch.int64), torch.empty(R, P, dtype=torch.int64)
+    do_cross, elite = torch.empty(R, P, dtype=torch.uint8), torch.empty(R, P, dtype=torch.uint8)
+    f = fitness.to(torch.float64).contiguous()
+    sp, sv, cnt = species.contiguous(), survivors.to(torch.uint8).contiguous(), counts.contiguous()
+    keys = rng.keys.contiguous()
+    _lib.select_parents(f.data_ptr(), sp.data_ptr(), sv.data_ptr(), cnt.data_ptr(), keys.data_ptr(),
+                        base.data_ptr(), R, P, S, float(cfg.survival_threshold), cfg.elitism,
+                        cfg.elitism_min_species_size, float(cfg.interspecies_crossover_prob),
+                        float(cfg.crossover_prob), first.data_ptr(), second.data_ptr(), do_cross.data_ptr(),
+                        elite.data_ptr(), torch.get_num_threads())
+    return first, second, do_cross.bool(), elite.bool()
+
+
+def choose_representatives(g: Genomes, species: Tensor, capacity: int, rng: RunRNG
+                           ) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """``speciate``'s representatives: ``(alive [R, S], rep_conn, rep_weight, rep_sigma)``
+    for ``capacity`` slots; takes one block of ``P`` counters per run."""
+    _require()
+    R, P, N = g.num_runs, g.pop_size, g.num_nodes
+    base = rng.take(P)
+    T = g.weight.dtype
+    alive = torch.empty(R, capacity, dtype=torch.uint8)
+    rep_conn = torch.empty(R, capacity, N, N, dtype=torch.bool)
+    rep_weight = torch.empty(R, capacity, N, N, dtype=T)
+    rep_sigma = torch.empty(R, capacity, dtype=T)
+    conn, weight, sigma = g.conn.contiguous(), g.weight.contiguous(), g.sigma.contiguous()
+    sp, keys = species.contiguous(), rng.keys.contiguous()
+    getattr(_lib, f"choose_representatives_{'f32' if T == torch.float32 else 'f64'}")(
+        sp.data_ptr(), conn.data_ptr(), weight.data_ptr(), sigma.data_ptr(), keys.data_ptr(), base.data_ptr(),
+        R, P, capacity, N * N, alive.data_ptr(), rep_conn.data_ptr(), rep_weight.data_ptr(), rep_sigma.data_ptr(),
+        torch.get_num_threads())
+    return alive.bool(), rep_conn, rep_weight, rep_sigma
