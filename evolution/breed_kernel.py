@@ -62,6 +62,7 @@ def breed_blocks(P: int, N: int) -> tuple[list[int], int]:
 
 _SOURCE = r"""
 #include <stdint.h>
+#include <stdlib.h>
 #include <string.h>
 #include <math.h>
 """ + COUNTER_RNG_C + BOX_MULLER_C + r"""
@@ -102,16 +103,17 @@ static inline void phase1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *p
                   const uint8_t *active, T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T *cs,     \
                   int64_t *src, int64_t *dst, uint8_t *request, const int64_t *keys,             \
                   const int64_t *base, const int64_t *blocks, int64_t R, int64_t P, int64_t N,   \
-                  double inherit_disabled, double node_add_prob, int64_t row0, int64_t row1) {    \
+                  double inherit_disabled, double node_add_prob, int64_t parent_row0, int64_t row0,\
+                  int64_t row1) {                                                                 \
     const int64_t NN = N * N;                                                                     \
     for (int64_t row = row0; row < row1; ++row) {                                                   \
-        const int64_t r = row / P, p = row % P;                                                   \
+        const int64_t r = row / P, p = row % P, crow = row - row0; /* child arrays: the run's block */\
         const uint64_t key = (uint64_t)keys[r], b0 = (uint64_t)base[r];                          \
-        const int64_t a = a_idx[row], b = b_idx[row];                                             \
+        const int64_t a = a_idx[row] - parent_row0, b = b_idx[row] - parent_row0;                 \
         const T *fw = pw + a * NN, *ow = pw + b * NN;                                             \
         const uint8_t *fc = pc + a * NN, *fe = pe + a * NN, *oc = pc + b * NN, *oe = pe + b * NN; \
-        T *w = cw + row * NN; uint8_t *c = cc + row * NN, *e = ce + row * NN;                     \
-        memcpy(c, fc, NN); memcpy(cn + row * N, pn + a * N, N);                                   \
+        T *w = cw + crow * NN; uint8_t *c = cc + crow * NN, *e = ce + crow * NN;                  \
+        memcpy(c, fc, NN); memcpy(cn + crow * N, pn + a * N, N);                                  \
         memcpy(w, fw, NN * sizeof(T)); /* no gene: weight 0 in every genome */                    \
         int32_t genes[MAX_SLOTS];                                                                 \
         if (do_cross[row]) {                                                                      \
@@ -132,9 +134,9 @@ static inline void phase1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *p
                 const int dip = !fe[s] || (matching && !oe[s]);                                   \
                 e[s] = !(dip && u_stay[g] < inherit_disabled);                                    \
             }                                                                                     \
-            cs[row] = uniform01(key, b0 + blocks[B_SIGMA_PICK] + p) < 0.5 ? ps[b] : ps[a];        \
+            cs[crow] = uniform01(key, b0 + blocks[B_SIGMA_PICK] + p) < 0.5 ? ps[b] : ps[a];       \
         } else {                                                                                  \
-            memcpy(e, fe, NN); cs[row] = ps[a];                                                   \
+            memcpy(e, fe, NN); cs[crow] = ps[a];                                                  \
         }                                                                                         \
         request[row] = 0; src[row] = 0; dst[row] = 0;                                             \
         if (active[row] && uniform01(key, b0 + blocks[B_NODE_WANT] + p) < node_add_prob) {        \
@@ -158,9 +160,9 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
     const int64_t NN = N * N;                                                                     \
     const T mean = (T)w_mean, stdev = (T)w_stdev, lo = (T)w_min, hi = (T)w_max, power = (T)w_power;\
         for (int64_t row = row0; row < row1; ++row) {                                                   \
-        const int64_t r = row / P, p = row % P;                                                   \
+        const int64_t r = row / P, p = row % P, crow = row - row0;                                \
         const uint64_t key = (uint64_t)keys[r], b0 = (uint64_t)base[r];                          \
-        T *w = cw + row * NN; uint8_t *c = cc + row * NN, *e = ce + row * NN, *nd = cn + row * N; \
+        T *w = cw + crow * NN; uint8_t *c = cc + crow * NN, *e = ce + crow * NN, *nd = cn + crow * N;\
         if (granted[row]) {                                                                       \
             const int64_t i = src[row], j = dst[row], k = new_node[row];                          \
             const T old = w[i * N + j];                                                           \
@@ -235,7 +237,7 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
         }                                                                                         \
         if (uniform01(key, b0 + blocks[B_S_WANT] + p) < s_rate) {                                 \
             T step = (T)normal_at(key, b0 + blocks[B_S_NOISE] + 2 * p) * (T)s_power;              \
-            cs[row] = clampT_##SFX(cs[row] + step, (T)s_min, (T)s_max);                           \
+            cs[crow] = clampT_##SFX(cs[crow] + step, (T)s_min, (T)s_max);                         \
         }                                                                                         \
         const uint64_t c_t = b0 + blocks[B_TOGGLE] + p * NN;                                      \
         uint8_t flip[MAX_SLOTS + 1];                                                              \
@@ -258,17 +260,34 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
                  double w_mean, double w_stdev, double w_min, double w_max, double w_rate,        \
                  double w_rate_sum, double w_replace, double w_power, double s_rate, double s_power,\
                  double s_min, double s_max, double toggle_rate, const uint8_t *reserved,         \
-                 int64_t first_hidden, int threads) {                                             \
+                 int64_t first_hidden, const int64_t *dest_runs, int threads) {                   \
     const int64_t NN = N * N, words = (NN + 63) / 64;                                             \
     _Pragma("omp parallel for schedule(static) num_threads(threads)")                             \
     for (int64_t r = 0; r < R; ++r) {                                                             \
         const int64_t row0 = r * P, row1 = row0 + P;                                              \
-        phase1_##SFX(pw, pc, pe, pn, ps, a_idx, b_idx, do_cross, active, cw, cc, ce, cn, cs, src, dst,\
-                     request, keys, base, blocks, R, P, N, inherit_disabled, node_add_prob, row0, row1);\
+        /* dest_runs: the children overwrite their parents' run dest_runs[r] of the parent arrays \
+           (the same arrays as the child ones), so the run's parents are copied aside first. */ \
+        const int64_t c0 = (dest_runs ? dest_runs[r] : r) * P;                                    \
+        T *cw_r = cw + c0 * NN, *cs_r = cs + c0;                                                  \
+        uint8_t *cc_r = cc + c0 * NN, *ce_r = ce + c0 * NN, *cn_r = cn + c0 * N;                  \
+        const T *pw_r = pw, *ps_r = ps; const uint8_t *pc_r = pc, *pe_r = pe, *pn_r = pn;          \
+        int64_t parent_row0 = 0; char *aside = NULL;                                              \
+        if (dest_runs) {                                                                          \
+            aside = malloc(P * (NN * (sizeof(T) + 2) + N + sizeof(T)));                           \
+            T *w = (T *)aside, *sg = w + P * NN;                                                  \
+            uint8_t *c = (uint8_t *)(sg + P), *e = c + P * NN, *nd = e + P * NN;                  \
+            memcpy(w, pw + c0 * NN, P * NN * sizeof(T)); memcpy(sg, ps + c0, P * sizeof(T));       \
+            memcpy(c, pc + c0 * NN, P * NN); memcpy(e, pe + c0 * NN, P * NN); memcpy(nd, pn + c0 * N, P * N);\
+            pw_r = w; ps_r = sg; pc_r = c; pe_r = e; pn_r = nd; parent_row0 = c0;                 \
+        }                                                                                         \
+        phase1_##SFX(pw_r, pc_r, pe_r, pn_r, ps_r, a_idx, b_idx, do_cross, active, cw_r, cc_r, ce_r, cn_r,\
+                     cs_r, src, dst, request, keys, base, blocks, R, P, N, inherit_disabled, node_add_prob,\
+                     parent_row0, row0, row1);                                                    \
+        free(aside);                                                                              \
         uint8_t used[MAX_ROWS]; int64_t free_slots[MAX_ROWS], n_free = 0;                         \
         for (int64_t j = 0; j < N; ++j) used[j] = reserved[r * N + j];                            \
-        for (int64_t row = row0; row < row1; ++row)                                               \
-            for (int64_t j = 0; j < N; ++j) used[j] |= cn[row * N + j];                           \
+        for (int64_t q = 0; q < P; ++q)                                                           \
+            for (int64_t j = 0; j < N; ++j) used[j] |= cn_r[q * N + j];                           \
         for (int64_t j = first_hidden; j < N; ++j) if (!used[j]) free_slots[n_free++] = j;        \
         uint64_t wanted[MAX_SLOTS / 64] = {0};                                                    \
         for (int64_t row = row0; row < row1; ++row)                                               \
@@ -282,13 +301,14 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
             const int64_t k = before[f / 64] + __builtin_popcountll(wanted[f / 64] & ((1ULL << (f % 64)) - 1));\
             if (k < n_free) { granted[row] = 1; new_node[row] = free_slots[k]; }                  \
         }                                                                                         \
-        phase2_##SFX(cw, cc, ce, cn, cs, new_node, granted, src, dst, active, keys, base, blocks, R, P, N,\
+        phase2_##SFX(cw_r, cc_r, ce_r, cn_r, cs_r, new_node, granted, src, dst, active, keys, base, blocks, R, P, N,\
                      first_output, feed_forward, per_gene, conn_add_prob, w_mean, w_stdev, w_min, w_max,\
                      w_rate, w_rate_sum, w_replace, w_power, s_rate, s_power, s_min, s_max, toggle_rate,\
                      row0, row1);                                                                 \
     }                                                                                             \
 }                                                                                                 \
-typedef struct { const uint64_t *bits; const int64_t *before, *cnt, *top; const T *w, *sig; } genes_##SFX; \
+/* map: the weight and sigma row of each bitset row (NULL: the same row). */                     \
+typedef struct { const uint64_t *bits; const int64_t *before, *cnt, *top; const T *w, *sig; const int64_t *map; } genes_##SFX; \
 /* The compatibility distance of row ra of set a and row rb of set b; or, when the terms     \
    without weights already reach `bound`, that partial sum (>= bound, and <= the distance:    \
    the weight term is >= 0 and rounded addition is monotone), skipping the weight term. */   \
@@ -309,11 +329,12 @@ static inline double pair_dist_##SFX(genes_##SFX a, int64_t ra, genes_##SFX b, i
     const double n_max = na > nb ? na : nb;                                                       \
     const double norm = n_max >= coef[4] ? n_max : 1.0;                                           \
     const double structure = coef[0] * excess / norm + coef[1] * disjoint / norm;                 \
-    const double sigma = coef[3] * fabs((double)a.sig[ra] - (double)b.sig[rb]);                   \
+    const int64_t wra = a.map ? a.map[ra] : ra, wrb = b.map ? b.map[rb] : rb;                      \
+    const double sigma = coef[3] * fabs((double)a.sig[wra] - (double)b.sig[wrb]);                 \
     const double partial = structure + sigma;                                                     \
     if (partial >= bound) return partial;                                                         \
     double wdiff = 0.0;                                                                           \
-    const T *wa = a.w + ra * NN, *wb = b.w + rb * NN;                                             \
+    const T *wa = a.w + wra * NN, *wb = b.w + wrb * NN;                                           \
     for (int64_t k = 0; k < W; ++k)                                                               \
         for (uint64_t both = A[k] & B[k]; both; both &= both - 1) {                               \
             const int64_t s = k * 64 + __builtin_ctzll(both);                                     \
@@ -324,11 +345,12 @@ static inline double pair_dist_##SFX(genes_##SFX a, int64_t ra, genes_##SFX b, i
 }                                                                                                 \
 /* Distances between genome rows a[r, i] and b[r, j] (rows index the sets' flat arrays). */     \
 void distances_##SFX(const uint64_t *bits_a, const int64_t *pre_a, const int64_t *cnt_a, const int64_t *top_a,\
-                     const T *w_a, const T *sig_a, const int64_t *rows_a, int64_t Ka,            \
+                     const T *w_a, const T *sig_a, const int64_t *map_a, const int64_t *rows_a, int64_t Ka,\
                      const uint64_t *bits_b, const int64_t *pre_b, const int64_t *cnt_b, const int64_t *top_b,\
-                     const T *w_b, const T *sig_b, const int64_t *rows_b, int64_t Kb,            \
+                     const T *w_b, const T *sig_b, const int64_t *map_b, const int64_t *rows_b, int64_t Kb,\
                      int64_t R, int64_t NN, int64_t W, const double *coef, double *out, int threads) { \
-    const genes_##SFX a = {bits_a, pre_a, cnt_a, top_a, w_a, sig_a}, b = {bits_b, pre_b, cnt_b, top_b, w_b, sig_b};\
+    const genes_##SFX a = {bits_a, pre_a, cnt_a, top_a, w_a, sig_a, map_a};                       \
+    const genes_##SFX b = {bits_b, pre_b, cnt_b, top_b, w_b, sig_b, map_b};                       \
     _Pragma("omp parallel for schedule(static) num_threads(threads)")                            \
     for (int64_t q = 0; q < R * Ka; ++q) {                                                        \
         const int64_t r = q / Ka;                                                                 \
@@ -341,14 +363,16 @@ void distances_##SFX(const uint64_t *bits_a, const int64_t *pre_a, const int64_t
    slot without members (slots >= S mean the caller must grow), and every genome still without \
    a species within thr of a founder joins it. founded[r, k]: run r's k-th new slot. */         \
 void assign_species_##SFX(const uint64_t *g_bits, const int64_t *g_pre, const int64_t *g_cnt,     \
-                          const int64_t *g_top, const T *g_w, const T *g_sig, const uint64_t *r_bits, \
+                          const int64_t *g_top, const T *g_w, const T *g_sig, const int64_t *g_map,\
+                          const uint64_t *r_bits,                                                 \
                           const int64_t *r_pre, const int64_t *r_cnt,\
-                          const int64_t *r_top, const T *r_w, const T *r_sig, const uint8_t *alive, \
+                          const int64_t *r_top, const T *r_w, const T *r_sig, const int64_t *r_map,\
+                          const uint8_t *alive,                                                   \
                           int64_t R, int64_t P, int64_t S, int64_t NN, int64_t W, const double *coef,\
                           double thr, int64_t *species, int64_t *founded, int64_t *n_founded,     \
                           uint8_t *taken, int threads) {                                          \
-    const genes_##SFX g = {g_bits, g_pre, g_cnt, g_top, g_w, g_sig};                              \
-    const genes_##SFX rep = {r_bits, r_pre, r_cnt, r_top, r_w, r_sig};\
+    const genes_##SFX g = {g_bits, g_pre, g_cnt, g_top, g_w, g_sig, g_map};                       \
+    const genes_##SFX rep = {r_bits, r_pre, r_cnt, r_top, r_w, r_sig, r_map};                     \
     _Pragma("omp parallel for schedule(static) num_threads(threads)")                            \
     for (int64_t r = 0; r < R; ++r) {                                                             \
         int64_t *sp = species + r * P;                                                            \
@@ -384,12 +408,12 @@ DEFINE_BREED(double, f64)
 void normals_check(uint64_t key, uint64_t c0, int64_t n, double *out) {
     for (int64_t k = 0; k < n; ++k) out[k] = normal_at(key, c0 + 2 * (uint64_t)k);
 }
-/* Gene bitsets, counts and highest occupied slot (-1: none) of rows conn[M, NN]. */
-void gene_bits(const uint8_t *conn, int64_t M, int64_t NN, int64_t W, uint64_t *bits, int64_t *before,
+/* Gene bitsets, counts and highest occupied slot (-1: none) of rows conn[M, NN] (rows: of those rows). */
+void gene_bits(const uint8_t *conn, const int64_t *rows, int64_t M, int64_t NN, int64_t W, uint64_t *bits, int64_t *before,
                int64_t *count, int64_t *top, int threads) {
     _Pragma("omp parallel for schedule(static) num_threads(threads)")
     for (int64_t m = 0; m < M; ++m) {
-        const uint8_t *c = conn + m * NN;
+        const uint8_t *c = conn + (rows ? rows[m] : m) * NN;
         uint64_t *b = bits + m * W;
         int64_t n = 0, t = -1;
         for (int64_t k = 0; k < W; ++k) {
@@ -438,15 +462,15 @@ def kernel_available() -> bool:
             for sfx in ("f32", "f64"):
                 f = getattr(_lib, f"breed_{sfx}")
                 f.restype = None
-                f.argtypes = [P] * 20 + [L] * 3 + [D] * 2 + [P] * 2 + [L] + [C] * 2 + [D] * 14 + [P, L, C]
+                f.argtypes = [P] * 20 + [L] * 3 + [D] * 2 + [P] * 2 + [L] + [C] * 2 + [D] * 14 + [P, L, P, C]
                 f = getattr(_lib, f"distances_{sfx}")
-                f.restype, f.argtypes = None, [P] * 7 + [L] + [P] * 7 + [L] * 4 + [P, P, C]
+                f.restype, f.argtypes = None, [P] * 8 + [L] + [P] * 8 + [L] * 4 + [P, P, C]
                 f = getattr(_lib, f"assign_species_{sfx}")
-                f.restype, f.argtypes = None, [P] * 13 + [L] * 5 + [P, D] + [P] * 4 + [C]
+                f.restype, f.argtypes = None, [P] * 15 + [L] * 5 + [P, D] + [P] * 4 + [C]
             _lib.normals_check.restype = None
             _lib.normals_check.argtypes = [ctypes.c_uint64, ctypes.c_uint64, L, P]
             _lib.gene_bits.restype = None
-            _lib.gene_bits.argtypes = [P, L, L, L, P, P, P, P, C]
+            _lib.gene_bits.argtypes = [P, P, L, L, L, P, P, P, P, C]
             _lib.touched_nodes.restype = None
             _lib.touched_nodes.argtypes = [P, P, L, L, L, P]
             _lib._typed = True
@@ -486,13 +510,15 @@ def _require(conn: Tensor, weight: Tensor) -> None:
 
 
 def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: Tensor, cfg: NEATConfig,
-          rng: RunRNG, reserved: Tensor | None, *, runs: Tensor | None = None) -> tuple[Genomes, Tensor]:
+          rng: RunRNG, reserved: Tensor | None, *, runs: Tensor | None = None, in_place: bool = False
+          ) -> tuple[Genomes, Tensor]:
     """Children ``[R, P]`` of parents ``first`` / ``second`` (``[R, P]`` genome indices of
     ``g``; ``first`` is the fitter where ``do_cross``), mutated where ``active``: the same as
     ``crossover`` then ``mutate_add_node``, ``mutate_add_connection``, ``mutate_weights``,
     ``mutate_sigma`` and ``mutate_toggle_enabled``, and the same draws. Returns the children and
     ``[R, P]`` bool: splits refused for want of a free node slot. ``runs[R]``: the parents are
-    those runs of ``g`` (a larger population), read in place."""
+    those runs of ``g`` (a larger population), read in place; with ``in_place`` the children
+    overwrite them (each run's parents are copied aside first) and ``g`` itself is returned."""
     _require(g.conn, g.weight)
     (R, P), N = first.shape, g.num_nodes
     T = g.weight.dtype
@@ -500,11 +526,15 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
     starts, total = breed_blocks(P, N)
     base = rng.take(total)
     keys, blocks = rng.keys.contiguous(), torch.tensor(starts, dtype=torch.int64)
+    if in_place and (runs is None or not all(t.is_contiguous() for t in g.tensors().values())):
+        raise ValueError("in_place breeding needs runs= and contiguous genome tensors")
     parents = {k: v.contiguous() for k, v in g.tensors().items()}
     rows = (torch.arange(R) if runs is None else runs.to(torch.int64).cpu()).unsqueeze(1) * P
     a_idx, b_idx = (first + rows).contiguous(), (second + rows).contiguous()
     cross, act = do_cross.to(torch.uint8).contiguous(), active.to(torch.uint8).contiguous()
-    child = Genomes(**{k: torch.empty((R, P, *t.shape[2:]), dtype=t.dtype) for k, t in parents.items()})
+    child = g if in_place else Genomes(**{k: torch.empty((R, P, *t.shape[2:]), dtype=t.dtype)
+                                          for k, t in parents.items()})
+    dest = runs.to(torch.int64).cpu().contiguous() if in_place else None
     src = torch.empty(R, P, dtype=torch.int64)
     dst = torch.empty(R, P, dtype=torch.int64)
     request = torch.empty(R, P, dtype=torch.uint8)
@@ -525,29 +555,35 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
         float(cfg.weight_mutate_rate + cfg.weight_replace_rate), float(cfg.weight_replace_rate),
         float(cfg.weight_mutate_power), float(cfg.sigma_mutate_rate), float(cfg.sigma_mutate_power),
         float(cfg.sigma_min_value), float(cfg.sigma_max_value), float(cfg.enabled_mutate_rate),
-        reserved8.data_ptr(), cfg.first_hidden, threads)
+        reserved8.data_ptr(), cfg.first_hidden, None if dest is None else dest.data_ptr(), threads)
     return child, request.bool() & ~granted.bool()
 
 
 class GeneBits:
     """Gene bitsets of a set of genomes ``conn [..., N, N]`` (flattened to rows), with their
-    weights and sigmas, for ``gene_distances``."""
+    weights and sigmas, for ``gene_distances``. ``runs``: of those runs of ``conn [R, P, N, N]``
+    only (the tensors are read in place, not copied)."""
 
-    def __init__(self, conn: Tensor, weight: Tensor, sigma: Tensor) -> None:
+    def __init__(self, conn: Tensor, weight: Tensor, sigma: Tensor, runs: Tensor | None = None) -> None:
         _require(conn, weight)
         N = conn.shape[-1]
         self.nn = N * N
         self.words = (self.nn + 63) // 64
         c = conn.reshape(-1, self.nn).contiguous()
-        M = c.shape[0]
-        self.weight = weight.reshape(M, self.nn).contiguous()
-        self.sigma = sigma.reshape(M).to(weight.dtype).contiguous()
+        self.weight = weight.reshape(c.shape[0], self.nn).contiguous()
+        self.sigma = sigma.reshape(c.shape[0]).to(weight.dtype).contiguous()
+        self.map: Tensor | None = None  # the weight and sigma row of each bitset row
+        if runs is not None:
+            P = conn.shape[1]
+            self.map = (runs.to(torch.int64).cpu().unsqueeze(1) * P + torch.arange(P)).flatten().contiguous()
+        M = c.shape[0] if self.map is None else self.map.shape[0]
         self.bits = torch.empty(M, self.words, dtype=torch.int64)
         self.before = torch.empty(M, self.words, dtype=torch.int64)  # genes in the words before
         self.count = torch.empty(M, dtype=torch.int64)
         self.top = torch.empty(M, dtype=torch.int64)
-        _lib.gene_bits(c.data_ptr(), M, self.nn, self.words, self.bits.data_ptr(), self.before.data_ptr(),
-                       self.count.data_ptr(), self.top.data_ptr(), torch.get_num_threads())
+        _lib.gene_bits(c.data_ptr(), None if self.map is None else self.map.data_ptr(), M, self.nn, self.words,
+                       self.bits.data_ptr(), self.before.data_ptr(), self.count.data_ptr(), self.top.data_ptr(),
+                       torch.get_num_threads())
 
 
 def touched_nodes(conn: Tensor, alive: Tensor) -> Tensor:
@@ -567,7 +603,7 @@ def _coefficients(cfg: NEATConfig) -> Tensor:
 
 def _genes_args(g: GeneBits) -> list[int]:
     return [g.bits.data_ptr(), g.before.data_ptr(), g.count.data_ptr(), g.top.data_ptr(), g.weight.data_ptr(),
-            g.sigma.data_ptr()]
+            g.sigma.data_ptr(), None if g.map is None else g.map.data_ptr()]
 
 
 def gene_distances(a: GeneBits, rows_a: Tensor, b: GeneBits, rows_b: Tensor, cfg: NEATConfig) -> Tensor:

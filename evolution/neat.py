@@ -21,6 +21,7 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
+from evolution import breed_kernel
 from evolution.checkpoint import (
     CHECKPOINT_FORMAT,
     CHECKPOINT_VERSION,
@@ -185,25 +186,32 @@ class NEAT:
         sub = (slice(None),) if all_runs else (torch.tensor(evolving, device=self.device),)
         rng = self.rng if all_runs else self.rng.subset(evolving)
         sp = self.species_state if all_runs else self.species_state.select_runs(sub[0])
-        # The parents are read in place (``runs``), not copied out of the whole population.
+        # The parents are read in place (``runs``), not copied out of the whole population;
+        # with the kernels, a subset's children are written in place too (``in_place``).
+        kernels = breed_kernel.usable_for(self.genomes) if self.fused_breeding is None else self.fused_breeding
+        in_place = (not all_runs and kernels
+                    and all(t.is_contiguous() for t in self.genomes.tensors().values()))
+        runs = None if all_runs else sub[0]
         children, _elite, sp, info = reproduce(self.genomes, fitness[sub], self.species[sub], sp, cfg, rng,
-                                               self.generation, fused=self.fused_breeding,
-                                               runs=None if all_runs else sub[0])
+                                               self.generation, fused=self.fused_breeding, runs=runs,
+                                               in_place=in_place)
         if bool(info.extinct.any()):
             gone = torch.nonzero(info.extinct).flatten().tolist()
             fresh = initial_genomes(cfg, rng.subset(gone), dtype=self.dtype)
             idx = torch.tensor(gone, device=self.device)
             for name, t in children.tensors().items():
-                t[idx] = getattr(fresh, name)
+                t[sub[0][idx] if in_place else idx] = getattr(fresh, name)
             sp.alive[idx] = False
             self._report("complete_extinction", [evolving[i] for i in gone])
-        species, sp = speciate(children, sp, cfg, rng, self.generation + 1, fused=self.fused_breeding)
+        species, sp = speciate(children, sp, cfg, rng, self.generation + 1, fused=self.fused_breeding,
+                               runs=runs if in_place else None)
         if all_runs:
             self.genomes, self.species, self.species_state = children, species, sp
         else:
             idx = sub[0]
-            for name, t in self.genomes.tensors().items():
-                t[idx] = getattr(children, name)
+            if not in_place:
+                for name, t in self.genomes.tensors().items():
+                    t[idx] = getattr(children, name)
             self.species[idx] = species
             full = self.species_state
             if sp.capacity > full.capacity:

@@ -91,8 +91,8 @@ def allocate_offspring(fitness: Tensor, species: Tensor, survivors: Tensor, pop_
 
 
 def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cfg: NEATConfig,
-              rng: RunRNG, generation: int, *, fused: bool | None = None, runs: Tensor | None = None
-              ) -> tuple[Genomes, Tensor, SpeciesState, ReproductionInfo]:
+              rng: RunRNG, generation: int, *, fused: bool | None = None, runs: Tensor | None = None,
+              in_place: bool = False) -> tuple[Genomes, Tensor, SpeciesState, ReproductionInfo]:
     """The next generation (before speciation).
 
     Returns ``(children, elite [R, P] bool, species state, info)``. Runs whose species all
@@ -100,8 +100,12 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
     them. ``fused``: breed with the C kernel (``evolution.breed_kernel``, same result) or the
     tensor operators; by default the kernel wherever it can run (CPU, compiler present).
     ``runs``: ``g`` is a larger population and the other arguments describe its runs ``runs``
-    (the kernel then reads those runs' parents in place).
+    (the kernel then reads those runs' parents in place). ``in_place`` (with ``runs``): the
+    children replace those runs' genomes in ``g``, which is returned (the kernel writes them
+    there directly; the tensor path copies them in).
     """
+    if in_place and runs is None:
+        raise ValueError("in_place needs runs=")
     P = fitness.shape[1]
     sp, survivors, _ = update_stagnation(fitness, species, sp, cfg, generation)
     counts = allocate_offspring(fitness, species, survivors, P)
@@ -115,8 +119,10 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
     active = ~elite
     reserved = _rep_nodes(sp)
     if use_kernels:
-        children, refused = breed_kernel.breed(g, first, second, do_cross, active, cfg, rng, reserved, runs=runs)
+        children, refused = breed_kernel.breed(g, first, second, do_cross, active, cfg, rng, reserved, runs=runs,
+                                               in_place=in_place)
     else:
+        whole = g
         if runs is not None:
             g = g.select_runs(runs)
         children = crossover(g.gather(first), g.gather(second), cfg, rng, do_cross)
@@ -125,6 +131,10 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
         children = mutate_weights(children, cfg, rng, active)
         children = mutate_sigma(children, cfg, rng, active)
         children = mutate_toggle_enabled(children, cfg, rng, active)
+        if in_place:
+            for name, t in whole.tensors().items():
+                t[runs] = getattr(children, name)
+            children = whole
 
     info = ReproductionInfo(
         extinct=~survivors.any(1),

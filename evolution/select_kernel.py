@@ -118,11 +118,13 @@ void select_parents(const double *fitness, const int64_t *species, const uint8_t
     }
 }
 /* speciate's representatives: per species slot, the member with the highest score (the last on
-   a tie), its conn/weight/sigma rows copied; slots without members zeroed. */
+   a tie), its conn/weight/sigma rows copied; slots without members zeroed. runs: the genomes are
+   those runs of a larger population. */
 #define DEFINE_REPS(T, SFX)                                                                       \
 void choose_representatives_##SFX(const int64_t *species, const uint8_t *conn, const T *weight,  \
-                                  const T *sigma, const int64_t *keys, const int64_t *base,        \
-                                  int64_t R, int64_t P, int64_t S, int64_t NN, uint8_t *alive,     \
+                                  const T *sigma, const int64_t *runs, const int64_t *keys,        \
+                                  const int64_t *base, int64_t R, int64_t P, int64_t S, int64_t NN,\
+                                  uint8_t *alive,                                                  \
                                   uint8_t *rep_conn, T *rep_weight, T *rep_sigma, int threads) {   \
     _Pragma("omp parallel for schedule(static) num_threads(threads)")                             \
     for (int64_t r = 0; r < R; ++r) {                                                             \
@@ -135,7 +137,7 @@ void choose_representatives_##SFX(const int64_t *species, const uint8_t *conn, c
             if (u >= best[s]) { best[s] = u; rep[s] = p; }                                        \
         }                                                                                         \
         for (int64_t s = 0; s < S; ++s) {                                                         \
-            const int64_t q = r * S + s, g = r * P + rep[s];                                      \
+            const int64_t q = r * S + s, g = (runs ? runs[r] : r) * P + rep[s];                   \
             alive[q] = rep[s] >= 0;                                                               \
             if (rep[s] >= 0) {                                                                    \
                 memcpy(rep_conn + q * NN, conn + g * NN, NN);                                     \
@@ -168,7 +170,7 @@ def kernel_available() -> bool:
             _lib.select_parents.argtypes = [P] * 6 + [L] * 3 + [F, L, L, D, D] + [P] * 4 + [C]
             for sfx in ("f32", "f64"):
                 f = getattr(_lib, f"choose_representatives_{sfx}")
-                f.restype, f.argtypes = None, [P] * 6 + [L] * 4 + [P] * 4 + [C]
+                f.restype, f.argtypes = None, [P] * 7 + [L] * 4 + [P] * 4 + [C]
             _lib._typed = True
     return _lib is not None
 
@@ -203,12 +205,13 @@ def select_parents(fitness: Tensor, species: Tensor, survivors: Tensor, counts: 
     return first, second, do_cross.bool(), elite.bool()
 
 
-def choose_representatives(g: Genomes, species: Tensor, capacity: int, rng: RunRNG
+def choose_representatives(g: Genomes, species: Tensor, capacity: int, rng: RunRNG, runs: Tensor | None = None
                            ) -> tuple[Tensor, Tensor, Tensor, Tensor]:
     """``speciate``'s representatives: ``(alive [R, S], rep_conn, rep_weight, rep_sigma)``
-    for ``capacity`` slots; takes one block of ``P`` counters per run."""
+    for ``capacity`` slots; takes one block of ``P`` counters per run. ``runs``: the genomes
+    ``species[R, P]`` describes are those runs of ``g`` (read in place)."""
     _require()
-    R, P, N = g.num_runs, g.pop_size, g.num_nodes
+    R, P, N = species.shape[0], g.pop_size, g.num_nodes
     base = rng.take(P)
     T = g.weight.dtype
     alive = torch.empty(R, capacity, dtype=torch.uint8)
@@ -217,8 +220,10 @@ def choose_representatives(g: Genomes, species: Tensor, capacity: int, rng: RunR
     rep_sigma = torch.empty(R, capacity, dtype=T)
     conn, weight, sigma = g.conn.contiguous(), g.weight.contiguous(), g.sigma.contiguous()
     sp, keys = species.contiguous(), rng.keys.contiguous()
+    rows = None if runs is None else runs.to(torch.int64).cpu().contiguous()
     getattr(_lib, f"choose_representatives_{'f32' if T == torch.float32 else 'f64'}")(
-        sp.data_ptr(), conn.data_ptr(), weight.data_ptr(), sigma.data_ptr(), keys.data_ptr(), base.data_ptr(),
+        sp.data_ptr(), conn.data_ptr(), weight.data_ptr(), sigma.data_ptr(), None if rows is None else rows.data_ptr(),
+        keys.data_ptr(), base.data_ptr(),
         R, P, capacity, N * N, alive.data_ptr(), rep_conn.data_ptr(), rep_weight.data_ptr(), rep_sigma.data_ptr(),
         torch.get_num_threads())
     return alive.bool(), rep_conn, rep_weight, rep_sigma

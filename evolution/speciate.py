@@ -107,26 +107,29 @@ def _first_true(mask: Tensor) -> tuple[Tensor, Tensor]:
 
 
 def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generation: int, *,
-             fused: bool | None = None) -> tuple[Tensor, SpeciesState]:
+             fused: bool | None = None, runs: Tensor | None = None) -> tuple[Tensor, SpeciesState]:
     """Assign every genome a species slot; returns ``(species [R, P] long, new state)``.
 
     ``fused``: assign by the C kernels (``evolution.breed_kernel.assign_species``, the same
     rule, distances agreeing to about 1e-15; ``evolution.select_kernel`` for the
     representatives) or by the tensor reference below; by default the kernels wherever they
-    can run."""
-    R, P = g.num_runs, g.pop_size
+    can run. ``runs``: the genomes are those runs of ``g`` (a larger population; the kernels
+    read them in place) and ``sp`` describes those runs."""
+    use_kernels = breed_kernel.usable_for(g) if fused is None else fused
+    if runs is not None and not (use_kernels and select_kernel.kernel_available()):
+        g, runs = g.select_runs(runs), None
+    R, P = sp.alive.shape[0], g.pop_size
     dev = g.device
-    runs = torch.arange(R, device=dev)
+    run_index = torch.arange(R, device=dev)
     # Pure: never edit the input (the representatives are only read, so they are not copied).
     sp = SpeciesState(**{k: v if k.startswith("rep_") else v.clone() for k, v in sp.tensors().items()})
-    use_kernels = breed_kernel.usable_for(g) if fused is None else fused
     if use_kernels:
-        species, sp = _assign_by_kernel(g, sp, cfg, generation)
+        species, sp = _assign_by_kernel(g, sp, cfg, generation, runs)
     else:
         species, sp = _assign_by_tensors(g, sp, cfg, generation)
     # Species without members die; each survivor takes a random member as representative.
     if use_kernels and select_kernel.kernel_available():
-        alive, rep_conn, rep_weight, rep_sigma = select_kernel.choose_representatives(g, species, sp.capacity, rng)
+        alive, rep_conn, rep_weight, rep_sigma = select_kernel.choose_representatives(g, species, sp.capacity, rng, runs)
         return species, SpeciesState(alive=alive, rep_conn=rep_conn, rep_weight=rep_weight, rep_sigma=rep_sigma,
                                      best_fitness=torch.where(alive, sp.best_fitness, -torch.inf),
                                      last_improved=sp.last_improved, created=sp.created, ident=sp.ident,
@@ -140,7 +143,7 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
     rep_index = _scatter_index(species, is_rep, sp.capacity)
     # The representatives: whole genome rows copied at once; slots without a species emptied.
     S = sp.capacity
-    flat = (rep_index + runs.unsqueeze(1) * P).flatten()
+    flat = (rep_index + run_index.unsqueeze(1) * P).flatten()
     reps = {k: getattr(g, k).flatten(0, 1).index_select(0, flat) for k in ("conn", "weight", "sigma")}
     dead = torch.nonzero(~alive.flatten()).squeeze(1)
     for k in ("conn", "weight", "sigma"):
@@ -218,9 +221,10 @@ def _assign_by_tensors(g: Genomes, sp: SpeciesState, cfg: NEATConfig, generation
     return species, sp
 
 
-def _assign_by_kernel(g: Genomes, sp: SpeciesState, cfg: NEATConfig, generation: int) -> tuple[Tensor, SpeciesState]:
+def _assign_by_kernel(g: Genomes, sp: SpeciesState, cfg: NEATConfig, generation: int,
+                      runs: Tensor | None = None) -> tuple[Tensor, SpeciesState]:
     """The same assignment by the C kernel, then the new species' bookkeeping as tensors."""
-    genes = breed_kernel.GeneBits(g.conn, g.weight, g.sigma)
+    genes = breed_kernel.GeneBits(g.conn, g.weight, g.sigma, runs)
     reps = breed_kernel.GeneBits(sp.rep_conn, sp.rep_weight, sp.rep_sigma)
     species, founded, n_founded = breed_kernel.assign_species(genes, reps, sp.alive, cfg)
     capacity = sp.capacity
