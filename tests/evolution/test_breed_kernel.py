@@ -112,6 +112,28 @@ def test_selection_kernel_equals_the_tensor_selection(seed, pop, slots, survival
 
 
 @needs_kernel
+def test_speciating_runs_in_place_equals_speciating_a_copy_of_them():
+    cfg = dataclasses.replace(XOR_CONFIG, node_add_prob=0.3, conn_add_prob=0.3)
+    neat = NEAT(cfg, seeds=[1, 2, 3, 4])
+    g = torch.Generator().manual_seed(3)
+    for _ in range(4):
+        neat.tell(torch.rand(4, cfg.pop_size, generator=g, dtype=torch.float64) * 16)
+    runs = torch.tensor([1, 3])
+    sp = neat.species_state.select_runs(runs)
+    out = []
+    for pop, rows in ((neat.genomes, runs), (neat.genomes.select_runs(runs), None)):
+        rng = RunRNG([2, 4])
+        out.append((*speciate(pop, sp, cfg, rng, 5, fused=True, runs=rows), rng.offsets))
+    (s0, sp0, o0), (s1, sp1, o1) = out
+    assert torch.equal(s0, s1) and torch.equal(o0, o1)
+    for name, t in sp0.tensors().items():
+        assert torch.equal(t, getattr(sp1, name)), name
+    with pytest.raises(ValueError, match="in_place needs runs"):
+        reproduce(neat.genomes, torch.zeros(4, cfg.pop_size, dtype=torch.float64), neat.species,
+                  neat.species_state, cfg, neat.rng, 5, in_place=True)
+
+
+@needs_kernel
 def test_kernel_distances_equal_the_reference():
     cfg = controller_config("snn", node_add_prob=0.3, conn_add_prob=0.5)
     neat = NEAT(cfg, seeds=[0, 1])
