@@ -97,8 +97,9 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
 
     Returns ``(children, elite [R, P] bool, species state, info)``. Runs whose species all
     went extinct get ``info.extinct``; their children are meaningless and the caller resets
-    them. ``fused``: breed with the C kernel (``evolution.breed_kernel``, same result) or the
-    tensor operators; by default the kernel wherever it can run (CPU, compiler present).
+    them. ``fused``: select and breed with the C kernels (``evolution.select_kernel``,
+    ``evolution.breed_kernel``, same result) or the tensor operators (``select_parents`` and
+    the operators); by default the kernels wherever they can run (CPU, compiler present).
     ``runs``: ``g`` is a larger population and the other arguments describe its runs ``runs``
     (the kernel then reads those runs' parents in place). ``in_place`` (with ``runs``): the
     children replace those runs' genomes in ``g``, which is returned (the kernel writes them
