@@ -95,6 +95,7 @@ static inline int64_t pick_k(double u, int64_t n) {
     return k > n - 1 ? n - 1 : (k < 0 ? 0 : k);
 }
 
+enum { JOB_CONN, JOB_PERTURB, JOB_REPLACE, JOB_SIGMA }; /* what a phase-2 normal is for */
 #define DEFINE_BREED(T, SFX)                                                                      \
 static inline T clampT_##SFX(T x, T lo, T hi) { x = x < lo ? lo : x; return x > hi ? hi : x; }   \
 /* Phase 1: crossover (or a copy of the first parent), then the add-node choice. */              \
@@ -148,7 +149,11 @@ static inline void phase1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *p
         }                                                                                         \
     }                                                                                             \
 }                                                                                                 \
-/* Phase 2, in place: the granted splits, add-connection, weights, sigma, enabled flags. */     \
+/* Phase 2, in place: the granted splits, add-connection, weights, sigma, enabled flags. The    \
+   normals are drawn for the whole run at once: pass 1 makes every decision and lists each     \
+   normal's counter with what it is for (a job), pass 2 computes them in one vector loop (a    \
+   child has a few genes, too few to fill a vector), pass 3 applies them child by child in the  \
+   reference's order (a new connection's initial weight before the weight mutation). */       \
 static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T *cs, const int64_t *new_node,  \
                   const uint8_t *granted, const int64_t *src, const int64_t *dst,                 \
                   const uint8_t *active, const int64_t *keys, const int64_t *base,                \
@@ -159,9 +164,17 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
                   double s_max, double toggle_rate, int64_t row0, int64_t row1) {                 \
     const int64_t NN = N * N;                                                                     \
     const T mean = (T)w_mean, stdev = (T)w_stdev, lo = (T)w_min, hi = (T)w_max, power = (T)w_power;\
-        for (int64_t row = row0; row < row1; ++row) {                                                   \
+    const int64_t max_jobs = (row1 - row0) * (NN + 3);                                            \
+    uint64_t *job_counter = malloc(max_jobs * (sizeof(uint64_t) + sizeof(double) + 2 * sizeof(int32_t) + 1));\
+    double *job_z = (double *)(job_counter + max_jobs);                                           \
+    int32_t *job_row = (int32_t *)(job_z + max_jobs), *job_slot = job_row + max_jobs;             \
+    uint8_t *job_kind = (uint8_t *)(job_slot + max_jobs);                                         \
+    int64_t n_jobs = 0;                                                                           \
+    uint64_t key = 0;                                                                             \
+    for (int64_t row = row0; row < row1; ++row) {                                                 \
         const int64_t r = row / P, p = row % P, crow = row - row0;                                \
-        const uint64_t key = (uint64_t)keys[r], b0 = (uint64_t)base[r];                          \
+        const uint64_t b0 = (uint64_t)base[r];                                                    \
+        key = (uint64_t)keys[r]; /* one run: the same key for every row */                        \
         T *w = cw + crow * NN; uint8_t *c = cc + crow * NN, *e = ce + crow * NN, *nd = cn + crow * N;\
         if (granted[row]) {                                                                       \
             const int64_t i = src[row], j = dst[row], k = new_node[row];                          \
@@ -203,41 +216,32 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
                 int64_t k = pick_k(uniform01(key, b0 + blocks[B_CONN_PICK] + p), n), i = 0;       \
                 while (k >= __builtin_popcountll(cand[i])) k -= __builtin_popcountll(cand[i++]);  \
                 const int64_t s = i * N + kth_bit(cand[i], k);                                    \
-                T init = (T)normal_at(key, b0 + blocks[B_CONN_INIT] + 2 * p) * stdev;             \
-                init = init + mean;                                                               \
-                w[s] = clampT_##SFX(init, lo, hi); c[s] = 1; e[s] = 1;                             \
+                job_counter[n_jobs] = b0 + blocks[B_CONN_INIT] + 2 * p; job_row[n_jobs] = (int32_t)crow;\
+                job_slot[n_jobs] = (int32_t)s; job_kind[n_jobs++] = JOB_CONN;                     \
+                c[s] = 1; e[s] = 1;                                                               \
                 genes[n_genes++] = (int32_t)s;                                                    \
             }                                                                                     \
         }                                                                                         \
         const int genome_hit = uniform01(key, b0 + blocks[B_W_GENOME] + p) < w_rate;              \
         const uint64_t c_u = b0 + blocks[B_W_U] + p * NN, c_z = b0 + blocks[B_W_NOISE] + 2 * p * NN;\
         if (per_gene || genome_hit) {                                                             \
-            /* which genes change (and how), then their normals in one vector loop */             \
-            double u[MAX_SLOTS + 1], z[MAX_SLOTS + 1];                                            \
-            int32_t hit[MAX_SLOTS + 1]; uint8_t replace[MAX_SLOTS + 1];                           \
+            /* which genes change, and how */                                                     \
+            double u[MAX_SLOTS + 1];                                                              \
             _Pragma("omp simd")                                                                   \
             for (int64_t g = 0; g < n_genes; ++g) u[g] = uniform01(key, c_u + genes[g]);          \
-            int64_t n_hit = 0;                                                                    \
             for (int64_t g = 0; g < n_genes; ++g) {                                               \
                 int h, rep;                                                                       \
                 if (per_gene) { const int perturb = u[g] < w_rate;                                \
                                 rep = !perturb && u[g] < w_rate_sum; h = perturb || rep; }         \
                 else { rep = u[g] < w_replace; h = 1; }                                           \
-                hit[n_hit] = genes[g]; replace[n_hit] = (uint8_t)rep; n_hit += h;                 \
-            }                                                                                     \
-            _Pragma("omp simd")                                                                   \
-            for (int64_t h = 0; h < n_hit; ++h) z[h] = normal_at(key, c_z + 2 * (uint64_t)hit[h]); \
-            for (int64_t h = 0; h < n_hit; ++h) {                                                 \
-                const int64_t s = hit[h];                                                         \
-                const T zt = (T)z[h];                                                             \
-                T fresh = zt * stdev; fresh = fresh + mean;                                       \
-                T step = zt * power; T pert = w[s] + step;                                        \
-                w[s] = clampT_##SFX(replace[h] ? fresh : pert, lo, hi);                           \
+                job_counter[n_jobs] = c_z + 2 * (uint64_t)genes[g]; job_row[n_jobs] = (int32_t)crow;\
+                job_slot[n_jobs] = genes[g]; job_kind[n_jobs] = rep ? JOB_REPLACE : JOB_PERTURB;  \
+                n_jobs += h;                                                                      \
             }                                                                                     \
         }                                                                                         \
         if (uniform01(key, b0 + blocks[B_S_WANT] + p) < s_rate) {                                 \
-            T step = (T)normal_at(key, b0 + blocks[B_S_NOISE] + 2 * p) * (T)s_power;              \
-            cs[crow] = clampT_##SFX(cs[crow] + step, (T)s_min, (T)s_max);                         \
+            job_counter[n_jobs] = b0 + blocks[B_S_NOISE] + 2 * p; job_row[n_jobs] = (int32_t)crow; \
+            job_slot[n_jobs] = 0; job_kind[n_jobs++] = JOB_SIGMA;                                 \
         }                                                                                         \
         const uint64_t c_t = b0 + blocks[B_TOGGLE] + p * NN;                                      \
         uint8_t flip[MAX_SLOTS + 1];                                                              \
@@ -245,6 +249,25 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
         for (int64_t g = 0; g < n_genes; ++g) flip[g] = uniform01(key, c_t + genes[g]) < toggle_rate; \
         for (int64_t g = 0; g < n_genes; ++g) e[genes[g]] ^= flip[g];                             \
     }                                                                                             \
+    _Pragma("omp simd")                                                                           \
+    for (int64_t q = 0; q < n_jobs; ++q) job_z[q] = normal_at(key, job_counter[q]);                \
+    for (int64_t q = 0; q < n_jobs; ++q) {                                                        \
+        T *w = cw + job_row[q] * NN;                                                              \
+        const int64_t s = job_slot[q];                                                            \
+        const T zt = (T)job_z[q];                                                                 \
+        if (job_kind[q] == JOB_CONN) {                                                            \
+            T init = zt * stdev; init = init + mean;                                              \
+            w[s] = clampT_##SFX(init, lo, hi);                                                    \
+        } else if (job_kind[q] == JOB_SIGMA) {                                                    \
+            T step = zt * (T)s_power;                                                             \
+            cs[job_row[q]] = clampT_##SFX(cs[job_row[q]] + step, (T)s_min, (T)s_max);             \
+        } else {                                                                                  \
+            T fresh = zt * stdev; fresh = fresh + mean;                                           \
+            T step = zt * power; T pert = w[s] + step;                                            \
+            w[s] = clampT_##SFX(job_kind[q] == JOB_REPLACE ? fresh : pert, lo, hi);               \
+        }                                                                                         \
+    }                                                                                             \
+    free(job_counter);                                                                            \
 }                                                                                                 \
 /* One breeding step, a run at a time (its children stay in cache between the phases):            \
    phase 1 for the run, its node registry (as evolution.innovation.assign_split_nodes:            \
