@@ -284,6 +284,46 @@ void expf_many_check(const float *x, float *ours, float *libm, int64_t n) {
     for (int64_t j = 0; j < n; ++j) libm[j] = expf(x[j]);
 }
 
+/* (float)sin(x) and (float)cos(x) for float x exactly as libm's double sin and cos rounded to
+   float (what the plant's sin(s[2]) computes), for up to LANES lanes at once, so the loop over
+   lanes vectorises: reduction by pi/2 in three parts (fdlibm's constants; exact to about 1e-26
+   for |x| < 2^12), Taylor polynomials on [-pi/4, pi/4] in double (a few ulp), then rounding to
+   float. libm itself takes every value whose double could lie within 2^-46 (relative) of a float
+   rounding boundary, where libm's double (within 1 ulp of the truth) might round the other way;
+   so the float is the same. Also |x| >= 2^12, |r| < 2^-20 (0 included: libm keeps sin(-0) = -0)
+   and non-finite x: about 1 in 10^6. */
+static inline void sincos_lanes_f32(const float *x, int n, float *sn, float *cs) {
+    uint64_t fix = 0, bad[LANES];
+    for (int j = 0; j < n; ++j) {
+        const double d = x[j];
+        const double t = d * 0x1.45f306dc9c883p-1 + 0x1.8p52, kd = t - 0x1.8p52; /* round(d * 2 / pi) */
+        uint64_t q; /* its low bits: the quadrant */
+        memcpy(&q, &t, 8);
+        const double r = ((d - kd * 0x1.921fb544p+0) - kd * 0x1.0b4611a6p-34) - kd * 0x1.3198a2e037073p-69;
+        const double z = r * r;
+        const double sr = r + r * (z * (((((((((-0x1.2f49b46814157p-57) * z + 0x1.952c77030ad4ap-49) * z + -0x1.ae7f3e733b81fp-41) * z + 0x1.6124613a86d09p-33) * z + -0x1.ae64567f544e4p-26) * z + 0x1.71de3a556c734p-19) * z + -0x1.a01a01a01a01ap-13) * z + 0x1.1111111111111p-7) * z + -0x1.5555555555555p-3)), cr = 1.0 + z * (((((((((-0x1.6827863b97d97p-53) * z + 0x1.ae7f3e733b81fp-45) * z + -0x1.93974a8c07c9dp-37) * z + 0x1.1eed8eff8d898p-29) * z + -0x1.27e4fb7789f5cp-22) * z + 0x1.a01a01a01a01ap-16) * z + -0x1.6c16c16c16c17p-10) * z + 0x1.5555555555555p-5) * z + -0x1.0000000000000p-1);
+        double sv = (q & 1) ? cr : sr, cv = (q & 1) ? sr : cr;
+        sv = (q & 2) ? -sv : sv;
+        cv = ((q + 1) & 2) ? -cv : cv;
+        const double ms = fabs(sv) * 0x1.0p-46, mc = fabs(cv) * 0x1.0p-46;
+        const float s_lo = (float)(sv - ms), s_hi = (float)(sv + ms), c_lo = (float)(cv - mc), c_hi = (float)(cv + mc);
+        sn[j] = s_lo; cs[j] = c_lo;
+        const uint64_t b = !(fabs(d) < 0x1.0p12) | (fabs(r) < 0x1.0p-20) | (s_lo != s_hi) | (c_lo != c_hi);
+        bad[j] = b;
+        fix |= b;
+    }
+    if (fix)
+        for (int j = 0; j < n; ++j)
+            if (bad[j]) { sn[j] = (float)sin((double)x[j]); cs[j] = (float)cos((double)x[j]); }
+}
+/* For the tests: this library's sincos_lanes_f32 and libm's, over n floats. */
+void sincos_check(const float *x, float *ours_s, float *ours_c, float *libm_s, float *libm_c, int64_t n) {
+    for (int64_t j = 0; j < n; j += LANES) {
+        const int m = n - j < LANES ? (int)(n - j) : LANES;
+        sincos_lanes_f32(x + j, m, ours_s + j, ours_c + j);
+    }
+    for (int64_t j = 0; j < n; ++j) { libm_s[j] = (float)sin((double)x[j]); libm_c[j] = (float)cos((double)x[j]); }
+}
 /* One network update of `lanes` sigmoid networks (lane k: values y[k*np ..], weights W[k]):
    y_j <- 1 / (1 + exp(-slope * sum_i y_i W_ij)), the sum over the n real nodes i ascending,
    as the reference; padding units (j >= n) get values nothing reads. */
@@ -338,7 +378,7 @@ void NAME(const T *w, const T *state0, int64_t *steps, int64_t *status, int64_t 
                                   UPDATE(y, (const T *const *)W, L_, np, n, slope)))           \
             }                                                                                  \
             T sn[LANES], cs[LANES];                                                            \
-            for (int k = 0; k < active; ++k) { sn[k] = sin(s[k][2]); cs[k] = cos(s[k][2]); }   \
+            SINCOS(T, active, s, sn, cs)                                                       \
             for (int k = 0; k < active; ++k) {                                                 \
                 T out = y[k * np + first_out];                                                 \
                 T force = bang ? (out > (T)0.5 ? (T)10.0 : (T)-10.0) : (T)10.0 * ((T)2.0 * out - (T)1.0); \
@@ -352,6 +392,15 @@ void NAME(const T *w, const T *state0, int64_t *steps, int64_t *status, int64_t 
         free(wbuf);                                                                            \
     }                                                                                          \
 }
+/* sin and cos of the lanes' angles: float lanes by sincos_lanes_f32, double ones by libm. */
+#define SINCOS(T, n, s, sn, cs)                                                                \
+    if (sizeof(T) == sizeof(float)) {                                                          \
+        float th[LANES];                                                                       \
+        for (int k = 0; k < (n); ++k) th[k] = (float)s[k][2];                                  \
+        sincos_lanes_f32(th, (n), (float *)(sn), (float *)(cs));                               \
+    } else {                                                                                   \
+        for (int k = 0; k < (n); ++k) { sn[k] = sin(s[k][2]); cs[k] = cos(s[k][2]); }         \
+    }
 DEFINE_SIG_LOOP(sig_loop_f32, sig_update_f32, plant_f32, float)
 DEFINE_SIG_LOOP(sig_loop_f64, sig_update_f64, plant_f64, double)
 

@@ -186,6 +186,36 @@ def test_markov_row_result_does_not_depend_on_batch_or_lane():
         assert steps(g.gather(torch.tensor([[i]]))).item() == all_steps[i].item()
 
 
+def test_vectorised_sincos_equals_libm_rounded_to_float():
+    """The float sigmoid loop's sin and cos of the pole angle (vectorised over lanes) must be
+    libm's double sin and cos rounded to float, bit for bit: random floats at many scales,
+    a sample of every bit pattern, the floats next to multiples of pi/2, and the edge cases."""
+    import ctypes
+    import math
+
+    import tasks.fused_loop as fl
+
+    assert fl.loop_available()
+    fn = fl._lib.sincos_check
+    fn.restype = None
+    fn.argtypes = [ctypes.c_void_p] * 5 + [ctypes.c_int64]
+    g = torch.Generator().manual_seed(0)
+    parts = [(torch.rand(200_000, generator=g, dtype=torch.float64) * 2 - 1).mul(scale).float()
+             for scale in (1e-6, 0.05, 0.25, 1.0, 4.0, 100.0, 4000.0, 1e5)]
+    bits = torch.arange(0, 2**32, 65537, dtype=torch.int64)
+    parts.append(torch.where(bits >= 2**31, bits - 2**32, bits).to(torch.int32).view(torch.float32))
+    k = (torch.arange(-2600, 2600, dtype=torch.float64) * (math.pi / 2)).float()
+    parts += [k, torch.nextafter(k, torch.full_like(k, math.inf)), torch.nextafter(k, torch.full_like(k, -math.inf))]
+    parts.append(torch.tensor([0.0, -0.0, float("inf"), float("-inf"), float("nan"), 4096.0, -4096.0, 1e-30, -1e-38,
+                               1e-45]))
+    x = torch.cat(parts).contiguous()
+    ours_s, ours_c, libm_s, libm_c = (torch.empty_like(x) for _ in range(4))
+    fn(x.data_ptr(), ours_s.data_ptr(), ours_c.data_ptr(), libm_s.data_ptr(), libm_c.data_ptr(), x.numel())
+    for ours, libm in ((ours_s, libm_s), (ours_c, libm_c)):
+        same = ours.view(torch.int32) == libm.view(torch.int32)
+        assert bool(same.all()), x[~same][:5]
+
+
 def test_vectorised_expf_equals_the_c_library():
     """The sigmoid kernel's vectorised expf repeats glibc's algorithm; checked here against the
     C library's expf on a sample of every float bit pattern plus the edge cases."""
