@@ -269,6 +269,8 @@ class NEAT:
 
     # --- checkpoints -------------------------------------------------------------------
     def state_dict(self) -> dict:
+        """A snapshot of the whole state (copies: later generations, which write the population
+        in place, do not change it), as ``save_checkpoint`` writes and ``from_state_dict`` reads."""
         return {
             "format": CHECKPOINT_FORMAT,
             "version": CHECKPOINT_VERSION,
@@ -278,13 +280,13 @@ class NEAT:
             "device": self.device.type,
             "generation": self.generation,
             "fitness_target": self.fitness_target,
-            "genomes": {k: v.cpu() for k, v in self.genomes.tensors().items()},
-            "species": self.species.cpu(),
-            "species_state": {k: v.cpu() for k, v in self.species_state.tensors().items()},
+            "genomes": {k: _snapshot(v) for k, v in self.genomes.tensors().items()},
+            "species": _snapshot(self.species),
+            "species_state": {k: _snapshot(v) for k, v in self.species_state.tensors().items()},
             "rng": self.rng.get_state(),
-            "best_fitness": self.best_fitness.cpu(),
-            "best_genomes": {k: v.cpu() for k, v in self.best_genomes.tensors().items()},
-            "solved_generation": self.solved_generation.cpu(),
+            "best_fitness": _snapshot(self.best_fitness),
+            "best_genomes": {k: _snapshot(v) for k, v in self.best_genomes.tensors().items()},
+            "solved_generation": _snapshot(self.solved_generation),
         }
 
     def save_checkpoint(self, path: str | os.PathLike) -> Path:
@@ -316,12 +318,14 @@ class NEAT:
             self.generation = int(data["generation"])
             self.fitness_target = float(data["fitness_target"])
             self.reporters = []
-            self.genomes = Genomes(**{k: v.to(target) for k, v in data["genomes"].items()})
-            self.species = data["species"].to(target)
-            self.species_state = SpeciesState(**{k: v.to(target) for k, v in data["species_state"].items()})
-            self.best_fitness = data["best_fitness"].to(target)
-            self.best_genomes = Genomes(**{k: v.to(target) for k, v in data["best_genomes"].items()})
-            self.solved_generation = data["solved_generation"].to(target)
+            # Copies: the population is written in place, and must not write into ``data``.
+            self.genomes = Genomes(**{k: v.to(target, copy=True) for k, v in data["genomes"].items()})
+            self.species = data["species"].to(target, copy=True)
+            self.species_state = SpeciesState(**{k: v.to(target, copy=True)
+                                                 for k, v in data["species_state"].items()})
+            self.best_fitness = data["best_fitness"].to(target, copy=True)
+            self.best_genomes = Genomes(**{k: v.to(target, copy=True) for k, v in data["best_genomes"].items()})
+            self.solved_generation = data["solved_generation"].to(target, copy=True)
             self.rng.set_state(data["rng"])
         except CheckpointError:
             raise
@@ -331,3 +335,8 @@ class NEAT:
         if tuple(self.genomes.weight.shape) != (R, P, N, N) or tuple(self.species.shape) != (R, P):
             raise CheckpointError(f"checkpoint {name!r} is malformed: tensor shapes do not match its config")
         return self
+
+
+def _snapshot(t: Tensor) -> Tensor:
+    """A CPU copy of ``t`` that shares no memory with it."""
+    return t.detach().to("cpu", copy=True)

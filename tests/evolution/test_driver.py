@@ -111,6 +111,33 @@ def test_checkpoint_resume_in_a_fresh_process_is_bit_identical(tmp_path):
         assert torch.equal(t[:, :cap] if cap else t, got[:, :cap] if cap else got), name
 
 
+def test_state_dict_is_a_snapshot_that_in_place_generations_leave_alone():
+    # Once a run is solved the others breed in place, in the whole population: a state dict
+    # (and each NEAT restored from it) must own its tensors, or one would write into another.
+    neat = NEAT(XOR_CONFIG, seeds=[1, 2, 3])
+    g = torch.Generator().manual_seed(0)
+
+    def fitness() -> torch.Tensor:
+        return torch.rand(3, XOR_CONFIG.pop_size, generator=g, dtype=torch.float64) * 16
+
+    solved = torch.zeros(3, XOR_CONFIG.pop_size, dtype=torch.bool)
+    solved[0, 0] = True
+    neat.tell(fitness(), solved)
+    neat.tell(fitness())
+    state = neat.state_dict()
+    before = {k: v.clone() for k, v in state["genomes"].items()}
+    f = fitness()
+    copies = [NEAT.from_state_dict(state), NEAT.from_state_dict(state), neat]
+    for n in copies:
+        n.tell(f)
+    for name, t in before.items():
+        assert torch.equal(state["genomes"][name], t), name
+    for other in copies[1:]:
+        for name, t in copies[0].genomes.tensors().items():
+            assert torch.equal(t, getattr(other.genomes, name)), name
+        assert torch.equal(copies[0].species, other.species)
+
+
 def test_corrupted_or_truncated_checkpoint_names_the_file(tmp_path):
     neat = NEAT(CFG, seeds=[1])
     path = neat.save_checkpoint(tmp_path / "good.pt")
