@@ -4,8 +4,12 @@ Units throughout: time in ms, membrane potential in mV, rates in Hz, currents in
 Izhikevich model's units (mV/ms; Qiu et al. write nA).
 """
 
-from snn_torch import functional
-from snn_torch.functional import (
+from snn_torch._vml_warmup import warm_up_vml
+
+warm_up_vml()  # before any parallel float op: see snn_torch/_vml_warmup.py (an MKL first-call race)
+
+from snn_torch import functional  # noqa: E402
+from snn_torch.functional import (  # noqa: E402
     CHATTERING,
     FAST_SPIKING,
     PRESETS,
@@ -19,7 +23,7 @@ from snn_torch.functional import (
     heaviside,
     superspike,
 )
-from snn_torch.modules import Izhikevich, IzhikevichCell, PopulationRecurrentIzhikevich
+from snn_torch.modules import Izhikevich, IzhikevichCell, PopulationRecurrentIzhikevich  # noqa: E402
 
 __version__ = "0.1.0"
 
