@@ -31,12 +31,13 @@ import threading
 import torch
 from torch import Tensor
 
+from evolution import select_kernel
 from evolution.config import NEATConfig
 from evolution.population import Genomes
 from evolution.rng import BOX_MULLER_C, COUNTER_RNG_C, RunRNG
 from snn_torch._cbuild import load_c_library
 
-__all__ = ["kernel_available", "usable_for", "breed", "breed_blocks", "GeneBits", "gene_distances", "assign_species",
+__all__ = ["kernel_available", "usable_for", "wanted", "breed", "breed_blocks", "GeneBits", "gene_distances", "assign_species",
            "touched_nodes"]
 
 # Draw blocks of one breeding step, in the reference's order (the C enum B_* lists them in the
@@ -170,11 +171,10 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
     int32_t *job_row = (int32_t *)(job_z + max_jobs), *job_slot = job_row + max_jobs;             \
     uint8_t *job_kind = (uint8_t *)(job_slot + max_jobs);                                         \
     int64_t n_jobs = 0;                                                                           \
-    uint64_t key = 0;                                                                             \
+    const uint64_t key = (uint64_t)keys[row0 / P]; /* rows row0..row1 are one run */              \
     for (int64_t row = row0; row < row1; ++row) {                                                 \
         const int64_t r = row / P, p = row % P, crow = row - row0;                                \
         const uint64_t b0 = (uint64_t)base[r];                                                    \
-        key = (uint64_t)keys[r]; /* one run: the same key for every row */                        \
         T *w = cw + crow * NN; uint8_t *c = cc + crow * NN, *e = ce + crow * NN, *nd = cn + crow * N;\
         if (granted[row]) {                                                                       \
             const int64_t i = src[row], j = dst[row], k = new_node[row];                          \
@@ -511,6 +511,12 @@ def _unsupported(conn: Tensor, weight: Tensor) -> str | None:
 def usable_for(g: Genomes) -> bool:
     """The kernels take CPU genomes of float32/float64 with at most ``MAX_NODES`` nodes."""
     return _unsupported(g.conn, g.weight) is None and kernel_available()
+
+
+def wanted(g: Genomes, fused: bool | None) -> bool:
+    """Whether a step on ``g`` runs on the C kernels (these and ``evolution.select_kernel``):
+    ``fused`` when given, else wherever they can run."""
+    return (usable_for(g) and select_kernel.kernel_available()) if fused is None else fused
 
 
 def usable_for_species(sp_conn: Tensor, sp_weight: Tensor) -> bool:

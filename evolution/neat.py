@@ -21,7 +21,6 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
-from evolution import breed_kernel
 from evolution.checkpoint import (
     CHECKPOINT_FORMAT,
     CHECKPOINT_VERSION,
@@ -186,32 +185,25 @@ class NEAT:
         sub = (slice(None),) if all_runs else (torch.tensor(evolving, device=self.device),)
         rng = self.rng if all_runs else self.rng.subset(evolving)
         sp = self.species_state if all_runs else self.species_state.select_runs(sub[0])
-        # The parents are read in place (``runs``), not copied out of the whole population;
-        # with the kernels, a subset's children are written in place too (``in_place``).
-        kernels = breed_kernel.usable_for(self.genomes) if self.fused_breeding is None else self.fused_breeding
-        in_place = (not all_runs and kernels
-                    and all(t.is_contiguous() for t in self.genomes.tensors().values()))
+        # A subset's parents are read, and its children written, in the whole population
+        # (``runs``, ``in_place``): nothing is copied out and back.
         runs = None if all_runs else sub[0]
         children, _elite, sp, info = reproduce(self.genomes, fitness[sub], self.species[sub], sp, cfg, rng,
                                                self.generation, fused=self.fused_breeding, runs=runs,
-                                               in_place=in_place)
+                                               in_place=not all_runs)
         if bool(info.extinct.any()):
             gone = torch.nonzero(info.extinct).flatten().tolist()
             fresh = initial_genomes(cfg, rng.subset(gone), dtype=self.dtype)
             idx = torch.tensor(gone, device=self.device)
             for name, t in children.tensors().items():
-                t[sub[0][idx] if in_place else idx] = getattr(fresh, name)
+                t[idx if all_runs else sub[0][idx]] = getattr(fresh, name)
             sp.alive[idx] = False
             self._report("complete_extinction", [evolving[i] for i in gone])
-        species, sp = speciate(children, sp, cfg, rng, self.generation + 1, fused=self.fused_breeding,
-                               runs=runs if in_place else None)
+        species, sp = speciate(children, sp, cfg, rng, self.generation + 1, fused=self.fused_breeding, runs=runs)
         if all_runs:
             self.genomes, self.species, self.species_state = children, species, sp
         else:
             idx = sub[0]
-            if not in_place:
-                for name, t in self.genomes.tensors().items():
-                    t[idx] = getattr(children, name)
             self.species[idx] = species
             full = self.species_state
             if sp.capacity > full.capacity:
@@ -319,7 +311,8 @@ class NEAT:
             self.fitness_target = float(data["fitness_target"])
             self.reporters = []
             # Copies: the population is written in place, and must not write into ``data``.
-            self.genomes = Genomes(**{k: v.to(target, copy=True) for k, v in data["genomes"].items()})
+            self.genomes = Genomes(**{k: v.to(target, copy=True, memory_format=torch.contiguous_format)
+                                      for k, v in data["genomes"].items()})
             self.species = data["species"].to(target, copy=True)
             self.species_state = SpeciesState(**{k: v.to(target, copy=True)
                                                  for k, v in data["species_state"].items()})

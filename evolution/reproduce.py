@@ -110,9 +110,8 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
     P = fitness.shape[1]
     sp, survivors, _ = update_stagnation(fitness, species, sp, cfg, generation)
     counts = allocate_offspring(fitness, species, survivors, P)
-    use_kernels = breed_kernel.usable_for(g) if fused is None else fused
-
-    if use_kernels and select_kernel.kernel_available():
+    use_kernels = breed_kernel.wanted(g, fused)
+    if use_kernels:
         first, second, do_cross, elite = select_kernel.select_parents(
             fitness, species, survivors, counts, cfg, rng)
     else:

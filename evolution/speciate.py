@@ -115,12 +115,9 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
     representatives) or by the tensor reference below; by default the kernels wherever they
     can run. ``runs``: the genomes are those runs of ``g`` (a larger population; the kernels
     read them in place) and ``sp`` describes those runs."""
-    use_kernels = breed_kernel.usable_for(g) if fused is None else fused
-    if runs is not None and not (use_kernels and select_kernel.kernel_available()):
+    use_kernels = breed_kernel.wanted(g, fused)
+    if runs is not None and not use_kernels:
         g, runs = g.select_runs(runs), None
-    R, P = sp.alive.shape[0], g.pop_size
-    dev = g.device
-    run_index = torch.arange(R, device=dev)
     # Pure: never edit the input (the representatives are only read, so they are not copied).
     sp = SpeciesState(**{k: v if k.startswith("rep_") else v.clone() for k, v in sp.tensors().items()})
     if use_kernels:
@@ -128,38 +125,37 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
     else:
         species, sp = _assign_by_tensors(g, sp, cfg, generation)
     # Species without members die; each survivor takes a random member as representative.
-    if use_kernels and select_kernel.kernel_available():
-        alive, rep_conn, rep_weight, rep_sigma = select_kernel.choose_representatives(g, species, sp.capacity, rng, runs)
-        return species, SpeciesState(alive=alive, rep_conn=rep_conn, rep_weight=rep_weight, rep_sigma=rep_sigma,
-                                     best_fitness=torch.where(alive, sp.best_fitness, -torch.inf),
-                                     last_improved=sp.last_improved, created=sp.created, ident=sp.ident,
-                                     next_id=sp.next_id)
-    counts = torch.zeros(R, sp.capacity, dtype=torch.long, device=dev)
+    if use_kernels:
+        alive, rep_conn, rep_weight, rep_sigma = select_kernel.choose_representatives(g, species, sp.capacity, rng,
+                                                                                      runs)
+    else:
+        alive, rep_conn, rep_weight, rep_sigma = _choose_representatives(g, species, sp.capacity, rng)
+    return species, SpeciesState(alive=alive, rep_conn=rep_conn, rep_weight=rep_weight, rep_sigma=rep_sigma,
+                                 best_fitness=torch.where(alive, sp.best_fitness, -torch.inf),
+                                 last_improved=sp.last_improved, created=sp.created, ident=sp.ident,
+                                 next_id=sp.next_id)
+
+
+def _choose_representatives(g: Genomes, species: Tensor, capacity: int, rng: RunRNG
+                            ) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """The reference choice (``select_kernel.choose_representatives`` in C): per species slot,
+    the member with the highest score, its rows copied; ``(alive, rep_conn, rep_weight, rep_sigma)``."""
+    R, P, S = g.num_runs, g.pop_size, capacity
+    counts = torch.zeros(R, S, dtype=torch.long, device=g.device)
     counts.scatter_add_(1, species, torch.ones_like(species))
     alive = counts > 0
     score = rng.rand(P, dtype=torch.float64)
-    best_score = torch.full((R, sp.capacity), -1.0, dtype=torch.float64, device=dev).scatter_reduce(1, species, score, "amax")
+    best_score = torch.full((R, S), -1.0, dtype=torch.float64, device=g.device).scatter_reduce(1, species, score, "amax")
     is_rep = score == torch.gather(best_score, 1, species)
-    rep_index = _scatter_index(species, is_rep, sp.capacity)
-    # The representatives: whole genome rows copied at once; slots without a species emptied.
-    S = sp.capacity
-    flat = (rep_index + run_index.unsqueeze(1) * P).flatten()
+    rep_index = _scatter_index(species, is_rep, S)
+    # Whole genome rows copied at once; slots without a species emptied.
+    flat = (rep_index + torch.arange(R, device=g.device).unsqueeze(1) * P).flatten()
     reps = {k: getattr(g, k).flatten(0, 1).index_select(0, flat) for k in ("conn", "weight", "sigma")}
     dead = torch.nonzero(~alive.flatten()).squeeze(1)
     for k in ("conn", "weight", "sigma"):
         reps[k][dead] = 0
-    new = SpeciesState(
-        alive=alive,
-        rep_conn=reps["conn"].view(R, S, *g.conn.shape[2:]),
-        rep_weight=reps["weight"].view(R, S, *g.weight.shape[2:]),
-        rep_sigma=reps["sigma"].view(R, S),
-        best_fitness=torch.where(alive, sp.best_fitness, -torch.inf),
-        last_improved=sp.last_improved,
-        created=sp.created,
-        ident=sp.ident,
-        next_id=sp.next_id,
-    )
-    return species, new
+    return (alive, reps["conn"].view(R, S, *g.conn.shape[2:]), reps["weight"].view(R, S, *g.weight.shape[2:]),
+            reps["sigma"].view(R, S))
 
 
 def _assign_by_tensors(g: Genomes, sp: SpeciesState, cfg: NEATConfig, generation: int) -> tuple[Tensor, SpeciesState]:
