@@ -74,16 +74,37 @@ enum { B_FROM_OTHER, B_STAYS, B_SIGMA_PICK, B_NODE_WANT, B_NODE_PICK, B_CONN_WAN
        B_W_GENOME, B_W_U, B_W_NOISE, B_S_WANT, B_S_NOISE, B_TOGGLE, N_BLOCKS };
 #define MAX_ROWS 64 /* the feed-forward closure: N <= 64 rows of one 64-bit word */
 
-/* The slots of the set bytes (0/1) of mask[0..n), ascending, eight bytes at a time (genes are
-   sparse); returns how many. */
-static inline int64_t set_slots(const uint8_t *mask, int64_t n, int32_t *out) {
-    int64_t m = 0, s = 0;
-    for (; s + 8 <= n; s += 8) {
-        uint64_t x; memcpy(&x, mask + s, 8);
-        while (x) { out[m++] = (int32_t)(s + (__builtin_ctzll(x) >> 3)); x &= x - 1; }
+/* The bytes (0/1) of mask[0..n) as W = ceil(n / 64) words of bits, branch-free: eight bytes to
+   eight bits by one multiply. */
+static inline void pack_bits(const uint8_t *mask, int64_t n, int64_t W, uint64_t *out) {
+    for (int64_t k = 0; k < W; ++k) {
+        uint64_t word = 0;
+        const int64_t lo = k * 64, hi = lo + 64 < n ? lo + 64 : n;
+        int64_t s = lo;
+        for (; s + 8 <= hi; s += 8) {
+            uint64_t x; memcpy(&x, mask + s, 8);
+            word |= (((x & 0x0101010101010101ULL) * 0x0102040810204080ULL) >> 56) << (s - lo);
+        }
+        for (; s < hi; ++s) word |= (uint64_t)(mask[s] != 0) << (s - lo);
+        out[k] = word;
     }
-    for (; s < n; ++s) if (mask[s]) out[m++] = (int32_t)s;
+}
+/* The set bits' positions, ascending; returns how many. */
+static inline int64_t bits_to_slots(const uint64_t *bits, int64_t W, int32_t *out) {
+    int64_t m = 0;
+    for (int64_t k = 0; k < W; ++k)
+        for (uint64_t x = bits[k]; x; x &= x - 1) out[m++] = (int32_t)(k * 64 + __builtin_ctzll(x));
     return m;
+}
+/* A bitset's genes in the words before each word, its count and its highest slot (-1: none). */
+static inline void bits_summary(const uint64_t *bits, int64_t W, int64_t *before, int64_t *count, int64_t *top) {
+    int64_t n = 0, t = -1;
+    for (int64_t k = 0; k < W; ++k) {
+        before[k] = n;
+        n += __builtin_popcountll(bits[k]);
+        if (bits[k]) t = k * 64 + 63 - __builtin_clzll(bits[k]);
+    }
+    *count = n; *top = t;
 }
 /* Position of the k-th set bit of x (k < popcount(x)). */
 static inline int kth_bit(uint64_t x, int64_t k) {
@@ -106,8 +127,8 @@ static inline void phase1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *p
                   int64_t *src, int64_t *dst, uint8_t *request, const int64_t *keys,             \
                   const int64_t *base, const int64_t *blocks, int64_t R, int64_t P, int64_t N,   \
                   double inherit_disabled, double node_add_prob, int64_t parent_row0, int64_t row0,\
-                  int64_t row1) {                                                                 \
-    const int64_t NN = N * N;                                                                     \
+                  int64_t row1, uint64_t *gbits) {                                                \
+    const int64_t NN = N * N, W = (NN + 63) / 64;                                                 \
     for (int64_t row = row0; row < row1; ++row) {                                                   \
         const int64_t r = row / P, p = row % P, crow = row - row0; /* child arrays: the run's block */\
         const uint64_t key = (uint64_t)keys[r], b0 = (uint64_t)base[r];                          \
@@ -117,12 +138,14 @@ static inline void phase1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *p
         T *w = cw + crow * NN; uint8_t *c = cc + crow * NN, *e = ce + crow * NN;                  \
         memcpy(c, fc, NN); memcpy(cn + crow * N, pn + a * N, N);                                  \
         memcpy(w, fw, NN * sizeof(T)); /* no gene: weight 0 in every genome */                    \
+        uint64_t *bits = gbits + row * W; /* the child's genes: the first parent's */             \
+        pack_bits(fc, NN, W, bits);                                                               \
         int32_t genes[MAX_SLOTS];                                                                 \
         if (do_cross[row]) {                                                                      \
             const uint64_t c_from = b0 + blocks[B_FROM_OTHER] + p * NN;                           \
             const uint64_t c_stay = b0 + blocks[B_STAYS] + p * NN;                                \
             memset(e, 0, NN);                                                                     \
-            const int64_t n = set_slots(fc, NN, genes);                                           \
+            const int64_t n = bits_to_slots(bits, W, genes);                                      \
             double u_from[MAX_SLOTS], u_stay[MAX_SLOTS];                                          \
             _Pragma("omp simd")                                                                   \
             for (int64_t g = 0; g < n; ++g) {                                                     \
@@ -142,7 +165,9 @@ static inline void phase1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *p
         }                                                                                         \
         request[row] = 0; src[row] = 0; dst[row] = 0;                                             \
         if (active[row] && uniform01(key, b0 + blocks[B_NODE_WANT] + p) < node_add_prob) {        \
-            const int64_t n = set_slots(e, NN, genes);                                            \
+            uint64_t on[MAX_SLOTS / 64];                                                          \
+            pack_bits(e, NN, W, on);                                                              \
+            const int64_t n = bits_to_slots(on, W, genes);                                        \
             if (n > 0) {                                                                          \
                 const int64_t s = genes[pick_k(uniform01(key, b0 + blocks[B_NODE_PICK] + p), n)]; \
                 src[row] = s / N; dst[row] = s % N; request[row] = 1;                             \
@@ -162,8 +187,9 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
                   int feed_forward, int per_gene, double conn_add_prob, double w_mean,            \
                   double w_stdev, double w_min, double w_max, double w_rate, double w_rate_sum,   \
                   double w_replace, double w_power, double s_rate, double s_power, double s_min,  \
-                  double s_max, double toggle_rate, int64_t row0, int64_t row1) {                 \
-    const int64_t NN = N * N;                                                                     \
+                  double s_max, double toggle_rate, int64_t row0, int64_t row1, uint64_t *gbits,  \
+                  int64_t *gbefore, int64_t *gcount, int64_t *gtop) {                             \
+    const int64_t NN = N * N, W = (NN + 63) / 64;                                                 \
     const T mean = (T)w_mean, stdev = (T)w_stdev, lo = (T)w_min, hi = (T)w_max, power = (T)w_power;\
     const int64_t max_jobs = (row1 - row0) * (NN + 3);                                            \
     uint64_t *job_counter = malloc(max_jobs * (sizeof(uint64_t) + sizeof(double) + 2 * sizeof(int32_t) + 1));\
@@ -176,6 +202,7 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
         const int64_t r = row / P, p = row % P, crow = row - row0;                                \
         const uint64_t b0 = (uint64_t)base[r];                                                    \
         T *w = cw + crow * NN; uint8_t *c = cc + crow * NN, *e = ce + crow * NN, *nd = cn + crow * N;\
+        uint64_t *bits = gbits + row * W; /* = c */                                               \
         if (granted[row]) {                                                                       \
             const int64_t i = src[row], j = dst[row], k = new_node[row];                          \
             const T old = w[i * N + j];                                                           \
@@ -183,10 +210,12 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
             w[i * N + k] = (T)1; c[i * N + k] = 1; e[i * N + k] = 1;                              \
             w[k * N + j] = old; c[k * N + j] = 1; e[k * N + j] = 1;                               \
             nd[k] = 1;                                                                            \
+            bits[(i * N + k) / 64] |= 1ULL << ((i * N + k) % 64);                                 \
+            bits[(k * N + j) / 64] |= 1ULL << ((k * N + j) % 64);                                 \
         }                                                                                         \
-        if (!active[row]) continue;                                                               \
+        if (!active[row]) { bits_summary(bits, W, gbefore + row * W, gcount + row, gtop + row); continue; }\
         int32_t genes[MAX_SLOTS + 1];                                                             \
-        int64_t n_genes = set_slots(c, NN, genes);                                                \
+        int64_t n_genes = bits_to_slots(bits, W, genes);                                          \
         if (uniform01(key, b0 + blocks[B_CONN_WANT] + p) < conn_add_prob) {                       \
             /* rows as bitsets: out[i] = genes i -> j; into[j] = i with a path i -> j (closure) */\
             uint64_t out[MAX_ROWS] = {0}, into[MAX_ROWS] = {0}, nodes = 0, ends = 0;              \
@@ -218,7 +247,7 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
                 const int64_t s = i * N + kth_bit(cand[i], k);                                    \
                 job_counter[n_jobs] = b0 + blocks[B_CONN_INIT] + 2 * p; job_row[n_jobs] = (int32_t)crow;\
                 job_slot[n_jobs] = (int32_t)s; job_kind[n_jobs++] = JOB_CONN;                     \
-                c[s] = 1; e[s] = 1;                                                               \
+                c[s] = 1; e[s] = 1; bits[s / 64] |= 1ULL << (s % 64);                            \
                 genes[n_genes++] = (int32_t)s;                                                    \
             }                                                                                     \
         }                                                                                         \
@@ -248,6 +277,7 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
         _Pragma("omp simd")                                                                       \
         for (int64_t g = 0; g < n_genes; ++g) flip[g] = uniform01(key, c_t + genes[g]) < toggle_rate; \
         for (int64_t g = 0; g < n_genes; ++g) e[genes[g]] ^= flip[g];                             \
+        bits_summary(bits, W, gbefore + row * W, gcount + row, gtop + row);                       \
     }                                                                                             \
     _Pragma("omp simd")                                                                           \
     for (int64_t q = 0; q < n_jobs; ++q) job_z[q] = normal_at(key, job_counter[q]);                \
@@ -283,7 +313,8 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
                  double w_mean, double w_stdev, double w_min, double w_max, double w_rate,        \
                  double w_rate_sum, double w_replace, double w_power, double s_rate, double s_power,\
                  double s_min, double s_max, double toggle_rate, const uint8_t *reserved,         \
-                 int64_t first_hidden, const int64_t *dest_runs, int threads) {                   \
+                 int64_t first_hidden, const int64_t *dest_runs, uint64_t *gbits, int64_t *gbefore,\
+                 int64_t *gcount, int64_t *gtop, int threads) {                                   \
     const int64_t NN = N * N, words = (NN + 63) / 64;                                             \
     _Pragma("omp parallel for schedule(static) num_threads(threads)")                             \
     for (int64_t r = 0; r < R; ++r) {                                                             \
@@ -305,7 +336,7 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
         }                                                                                         \
         phase1_##SFX(pw_r, pc_r, pe_r, pn_r, ps_r, a_idx, b_idx, do_cross, active, cw_r, cc_r, ce_r, cn_r,\
                      cs_r, src, dst, request, keys, base, blocks, R, P, N, inherit_disabled, node_add_prob,\
-                     parent_row0, row0, row1);                                                    \
+                     parent_row0, row0, row1, gbits);                                             \
         free(aside);                                                                              \
         uint8_t used[MAX_ROWS]; int64_t free_slots[MAX_ROWS], n_free = 0;                         \
         for (int64_t j = 0; j < N; ++j) used[j] = reserved[r * N + j];                            \
@@ -327,7 +358,7 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
         phase2_##SFX(cw_r, cc_r, ce_r, cn_r, cs_r, new_node, granted, src, dst, active, keys, base, blocks, R, P, N,\
                      first_output, feed_forward, per_gene, conn_add_prob, w_mean, w_stdev, w_min, w_max,\
                      w_rate, w_rate_sum, w_replace, w_power, s_rate, s_power, s_min, s_max, toggle_rate,\
-                     row0, row1);                                                                 \
+                     row0, row1, gbits, gbefore, gcount, gtop);                                   \
     }                                                                                             \
 }                                                                                                 \
 /* map: the weight and sigma row of each bitset row (NULL: the same row). */                     \
@@ -436,24 +467,8 @@ void gene_bits(const uint8_t *conn, const int64_t *rows, int64_t M, int64_t NN, 
                int64_t *count, int64_t *top, int threads) {
     _Pragma("omp parallel for schedule(static) num_threads(threads)")
     for (int64_t m = 0; m < M; ++m) {
-        const uint8_t *c = conn + (rows ? rows[m] : m) * NN;
-        uint64_t *b = bits + m * W;
-        int64_t n = 0, t = -1;
-        for (int64_t k = 0; k < W; ++k) {
-            uint64_t word = 0;
-            const int64_t lo = k * 64, hi = lo + 64 < NN ? lo + 64 : NN;
-            int64_t s = lo;
-            for (; s + 8 <= hi; s += 8) { /* 8 bytes (0/1) to 8 bits */
-                uint64_t x; memcpy(&x, c + s, 8);
-                word |= (((x & 0x0101010101010101ULL) * 0x0102040810204080ULL) >> 56) << (s - lo);
-            }
-            for (; s < hi; ++s) word |= (uint64_t)(c[s] != 0) << (s - lo);
-            b[k] = word;
-            before[m * W + k] = n;
-            n += __builtin_popcountll(word);
-            if (word) t = k * 64 + 63 - __builtin_clzll(word);
-        }
-        count[m] = n; top[m] = t;
+        pack_bits(conn + (rows ? rows[m] : m) * NN, NN, W, bits + m * W);
+        bits_summary(bits + m * W, W, before + m * W, count + m, top + m);
     }
 }
 /* Node slots touched by the genes of the living rows of conn[R * S, N, N]: out[R, N]. */
@@ -485,7 +500,7 @@ def kernel_available() -> bool:
             for sfx in ("f32", "f64"):
                 f = getattr(_lib, f"breed_{sfx}")
                 f.restype = None
-                f.argtypes = [P] * 20 + [L] * 3 + [D] * 2 + [P] * 2 + [L] + [C] * 2 + [D] * 14 + [P, L, P, C]
+                f.argtypes = [P] * 20 + [L] * 3 + [D] * 2 + [P] * 2 + [L] + [C] * 2 + [D] * 14 + [P, L] + [P] * 5 + [C]
                 f = getattr(_lib, f"distances_{sfx}")
                 f.restype, f.argtypes = None, [P] * 8 + [L] + [P] * 8 + [L] * 4 + [P, P, C]
                 f = getattr(_lib, f"assign_species_{sfx}")
@@ -540,14 +555,16 @@ def _require(conn: Tensor, weight: Tensor) -> None:
 
 def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: Tensor, cfg: NEATConfig,
           rng: RunRNG, reserved: Tensor | None, *, runs: Tensor | None = None, in_place: bool = False
-          ) -> tuple[Genomes, Tensor]:
+          ) -> tuple[Genomes, Tensor, GeneBits]:
     """Children ``[R, P]`` of parents ``first`` / ``second`` (``[R, P]`` genome indices of
     ``g``; ``first`` is the fitter where ``do_cross``), mutated where ``active``: the same as
     ``crossover`` then ``mutate_add_node``, ``mutate_add_connection``, ``mutate_weights``,
-    ``mutate_sigma`` and ``mutate_toggle_enabled``, and the same draws. Returns the children and
-    ``[R, P]`` bool: splits refused for want of a free node slot. ``runs[R]``: the parents are
-    those runs of ``g`` (a larger population), read in place; with ``in_place`` the children
-    overwrite them (each run's parents are copied aside first) and ``g`` itself is returned."""
+    ``mutate_sigma`` and ``mutate_toggle_enabled``, and the same draws. Returns the children,
+    ``[R, P]`` bool: splits refused for want of a free node slot, and the children's
+    ``GeneBits`` (built as the genes are written, so ``speciate`` need not scan them again;
+    valid while the children are unchanged). ``runs[R]``: the parents are those runs of ``g``
+    (a larger population), read in place; with ``in_place`` the children overwrite them (each
+    run's parents are copied aside first) and ``g`` itself is returned."""
     _require(g.conn, g.weight)
     (R, P), N = first.shape, g.num_nodes
     T = g.weight.dtype
@@ -571,6 +588,9 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
     granted = torch.empty(R, P, dtype=torch.uint8)
     reserved8 = (torch.zeros(R, N, dtype=torch.uint8) if reserved is None
                  else reserved.to(torch.uint8).contiguous())
+    words = (N * N + 63) // 64
+    bits, before = torch.empty(R * P, words, dtype=torch.int64), torch.empty(R * P, words, dtype=torch.int64)
+    count, top = torch.empty(R * P, dtype=torch.int64), torch.empty(R * P, dtype=torch.int64)
     getattr(_lib, f"breed_{_sfx(T)}")(
         parents["weight"].data_ptr(), parents["conn"].data_ptr(), parents["enabled"].data_ptr(),
         parents["node"].data_ptr(), parents["sigma"].data_ptr(), a_idx.data_ptr(), b_idx.data_ptr(),
@@ -584,8 +604,12 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
         float(cfg.weight_mutate_rate + cfg.weight_replace_rate), float(cfg.weight_replace_rate),
         float(cfg.weight_mutate_power), float(cfg.sigma_mutate_rate), float(cfg.sigma_mutate_power),
         float(cfg.sigma_min_value), float(cfg.sigma_max_value), float(cfg.enabled_mutate_rate),
-        reserved8.data_ptr(), cfg.first_hidden, None if dest is None else dest.data_ptr(), threads)
-    return child, request.bool() & ~granted.bool()
+        reserved8.data_ptr(), cfg.first_hidden, None if dest is None else dest.data_ptr(), bits.data_ptr(),
+        before.data_ptr(), count.data_ptr(), top.data_ptr(), threads)
+    genes = GeneBits.__new__(GeneBits)
+    genes._bind(child.weight, child.sigma, dest)
+    genes.bits, genes.before, genes.count, genes.top = bits, before, count, top
+    return child, request.bool() & ~granted.bool(), genes
 
 
 class GeneBits:
@@ -595,17 +619,9 @@ class GeneBits:
 
     def __init__(self, conn: Tensor, weight: Tensor, sigma: Tensor, runs: Tensor | None = None) -> None:
         _require(conn, weight)
-        N = conn.shape[-1]
-        self.nn = N * N
-        self.words = (self.nn + 63) // 64
+        self._bind(weight, sigma, runs)
         c = conn.reshape(-1, self.nn).contiguous()
-        self.weight = weight.reshape(c.shape[0], self.nn).contiguous()
-        self.sigma = sigma.reshape(c.shape[0]).to(weight.dtype).contiguous()
-        self.map: Tensor | None = None  # the weight and sigma row of each bitset row
-        if runs is not None:
-            P = conn.shape[1]
-            self.map = (runs.to(torch.int64).cpu().unsqueeze(1) * P + torch.arange(P)).flatten().contiguous()
-        M = c.shape[0] if self.map is None else self.map.shape[0]
+        M = self.rows
         self.bits = torch.empty(M, self.words, dtype=torch.int64)
         self.before = torch.empty(M, self.words, dtype=torch.int64)  # genes in the words before
         self.count = torch.empty(M, dtype=torch.int64)
@@ -613,6 +629,19 @@ class GeneBits:
         _lib.gene_bits(c.data_ptr(), None if self.map is None else self.map.data_ptr(), M, self.nn, self.words,
                        self.bits.data_ptr(), self.before.data_ptr(), self.count.data_ptr(), self.top.data_ptr(),
                        torch.get_num_threads())
+
+    def _bind(self, weight: Tensor, sigma: Tensor, runs: Tensor | None) -> None:
+        """The genomes' weights and sigmas (``[R, P, N, N]``, ``[R, P]``), and the row map."""
+        N = weight.shape[-1]
+        self.nn = N * N
+        self.words = (self.nn + 63) // 64
+        self.weight = weight.reshape(-1, self.nn).contiguous()
+        self.sigma = sigma.reshape(-1).to(weight.dtype).contiguous()
+        self.map: Tensor | None = None  # the weight and sigma row of each bitset row
+        if runs is not None:
+            P = weight.shape[1]
+            self.map = (runs.to(torch.int64).cpu().unsqueeze(1) * P + torch.arange(P)).flatten().contiguous()
+        self.rows = self.weight.shape[0] if self.map is None else self.map.shape[0]
 
 
 def touched_nodes(conn: Tensor, alive: Tensor) -> Tensor:

@@ -191,7 +191,9 @@ class NEAT:
         children, _elite, sp, info = reproduce(self.genomes, fitness[sub], self.species[sub], sp, cfg, rng,
                                                self.generation, fused=self.fused_breeding, runs=runs,
                                                in_place=not all_runs)
+        genes = info.child_genes
         if bool(info.extinct.any()):
+            genes = None  # the reset genomes are not the bred ones
             gone = torch.nonzero(info.extinct).flatten().tolist()
             fresh = initial_genomes(cfg, rng.subset(gone), dtype=self.dtype)
             idx = torch.tensor(gone, device=self.device)
@@ -199,7 +201,8 @@ class NEAT:
                 t[idx if all_runs else sub[0][idx]] = getattr(fresh, name)
             sp.alive[idx] = False
             self._report("complete_extinction", [evolving[i] for i in gone])
-        species, sp = speciate(children, sp, cfg, rng, self.generation + 1, fused=self.fused_breeding, runs=runs)
+        species, sp = speciate(children, sp, cfg, rng, self.generation + 1, fused=self.fused_breeding, runs=runs,
+                               genes=genes)
         if all_runs:
             self.genomes, self.species, self.species_state = children, species, sp
         else:

@@ -11,7 +11,7 @@ Parents are discarded.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import torch
 from torch import Tensor
@@ -41,6 +41,8 @@ class ReproductionInfo:
     stagnant_removed: Tensor  # long: species removed for stagnation
     split_refused: Tensor  # long: add-node mutations refused for want of a free slot
     offspring: Tensor  # [R, S] long: offspring allocated per species slot
+    # The children's gene bitsets when the C kernel bred them (for ``speciate``'s ``genes``).
+    child_genes: breed_kernel.GeneBits | None = field(default=None, repr=False, compare=False)
 
 
 def update_stagnation(fitness: Tensor, species: Tensor, sp: SpeciesState, cfg: NEATConfig,
@@ -118,8 +120,9 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
         first, second, do_cross, elite = select_parents(fitness, species, survivors, counts, cfg, rng)
     active = ~elite
     reserved = _rep_nodes(sp)
+    child_genes = None
     if use_kernels:
-        children, refused = breed_kernel.breed(g, first, second, do_cross, active, cfg, rng, reserved, runs=runs,
+        children, refused, child_genes = breed_kernel.breed(g, first, second, do_cross, active, cfg, rng, reserved, runs=runs,
                                                in_place=in_place)
     else:
         whole = g
@@ -141,6 +144,7 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
         stagnant_removed=(sp.alive & ~survivors).sum(1),
         split_refused=refused.sum(1),
         offspring=counts,
+        child_genes=child_genes,
     )
     return children, elite, sp, info
 

@@ -107,21 +107,24 @@ def _first_true(mask: Tensor) -> tuple[Tensor, Tensor]:
 
 
 def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generation: int, *,
-             fused: bool | None = None, runs: Tensor | None = None) -> tuple[Tensor, SpeciesState]:
+             fused: bool | None = None, runs: Tensor | None = None,
+             genes: breed_kernel.GeneBits | None = None) -> tuple[Tensor, SpeciesState]:
     """Assign every genome a species slot; returns ``(species [R, P] long, new state)``.
 
     ``fused``: assign by the C kernels (``evolution.breed_kernel.assign_species``, the same
     rule, distances agreeing to about 1e-15; ``evolution.select_kernel`` for the
     representatives) or by the tensor reference below; by default the kernels wherever they
     can run. ``runs``: the genomes are those runs of ``g`` (a larger population; the kernels
-    read them in place) and ``sp`` describes those runs."""
+    read them in place) and ``sp`` describes those runs. ``genes``: the genomes' gene bitsets
+    as ``breed_kernel.breed`` returned them with these genomes (the kernels then skip
+    computing them; ignored by the tensor reference)."""
     use_kernels = breed_kernel.wanted(g, fused)
     if runs is not None and not use_kernels:
         g, runs = g.select_runs(runs), None
     # Pure: never edit the input (the representatives are only read, so they are not copied).
     sp = SpeciesState(**{k: v if k.startswith("rep_") else v.clone() for k, v in sp.tensors().items()})
     if use_kernels:
-        species, sp = _assign_by_kernel(g, sp, cfg, generation, runs)
+        species, sp = _assign_by_kernel(g, sp, cfg, generation, runs, genes)
     else:
         species, sp = _assign_by_tensors(g, sp, cfg, generation)
     # Species without members die; each survivor takes a random member as representative.
@@ -218,9 +221,15 @@ def _assign_by_tensors(g: Genomes, sp: SpeciesState, cfg: NEATConfig, generation
 
 
 def _assign_by_kernel(g: Genomes, sp: SpeciesState, cfg: NEATConfig, generation: int,
-                      runs: Tensor | None = None) -> tuple[Tensor, SpeciesState]:
+                      runs: Tensor | None = None, genes: breed_kernel.GeneBits | None = None
+                      ) -> tuple[Tensor, SpeciesState]:
     """The same assignment by the C kernel, then the new species' bookkeeping as tensors."""
-    genes = breed_kernel.GeneBits(g.conn, g.weight, g.sigma, runs)
+    rows = g.num_runs * g.pop_size if runs is None else len(runs) * g.pop_size
+    if genes is None:
+        genes = breed_kernel.GeneBits(g.conn, g.weight, g.sigma, runs)
+    elif genes.rows != rows or genes.nn != g.num_nodes ** 2:
+        raise ValueError(f"genes describe {genes.rows} genomes of {genes.nn} slots, "
+                         f"the genomes are {rows} of {g.num_nodes ** 2}")
     reps = breed_kernel.GeneBits(sp.rep_conn, sp.rep_weight, sp.rep_sigma)
     species, founded, n_founded = breed_kernel.assign_species(genes, reps, sp.alive, cfg)
     capacity = sp.capacity

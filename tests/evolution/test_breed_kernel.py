@@ -134,6 +134,41 @@ def test_speciating_runs_in_place_equals_speciating_a_copy_of_them():
 
 
 @needs_kernel
+@pytest.mark.parametrize("subset", [False, True])
+def test_bred_gene_bits_are_the_childrens_and_speciate_the_same_with_them(subset):
+    cfg = dataclasses.replace(XOR_CONFIG, node_add_prob=0.3, conn_add_prob=0.3, enabled_mutate_rate=0.2)
+    neat = NEAT(cfg, seeds=[1, 2, 3, 4])
+    g = torch.Generator().manual_seed(5)
+    for _ in range(4):
+        neat.tell(torch.rand(4, cfg.pop_size, generator=g, dtype=torch.float64) * 16)
+    runs = torch.tensor([0, 2]) if subset else None
+    R = 2 if subset else 4
+    fitness = torch.rand(R, cfg.pop_size, generator=g, dtype=torch.float64) * 16
+    species = neat.species if runs is None else neat.species[runs]
+    sp = neat.species_state if runs is None else neat.species_state.select_runs(runs)
+    rng = RunRNG([1, 3] if subset else [1, 2, 3, 4])
+    children, _, sp, info = reproduce(neat.genomes, fitness, species, sp, cfg, rng, 4, fused=True, runs=runs,
+                                      in_place=subset)
+    bred = info.child_genes
+    scanned = breed_kernel.GeneBits(children.conn, children.weight, children.sigma, runs)
+    assert int(scanned.count.sum()) > 0
+    for name in ("bits", "before", "count", "top", "weight", "sigma"):
+        assert torch.equal(getattr(bred, name), getattr(scanned, name)), name
+    assert (bred.map is None) == (runs is None) and (runs is None or torch.equal(bred.map, scanned.map))
+    out = []
+    for genes in (None, bred):
+        r2 = RunRNG([1, 3] if subset else [1, 2, 3, 4])
+        out.append((*speciate(children, sp, cfg, r2, 5, fused=True, runs=runs, genes=genes), r2.offsets))
+    (s0, sp0, o0), (s1, sp1, o1) = out
+    assert torch.equal(s0, s1) and torch.equal(o0, o1)
+    for name, t in sp0.tensors().items():
+        assert torch.equal(t, getattr(sp1, name)), name
+    other = breed_kernel.GeneBits(children.conn[:1], children.weight[:1], children.sigma[:1])
+    with pytest.raises(ValueError, match="genes describe"):
+        speciate(children, sp, cfg, rng, 5, fused=True, runs=runs, genes=other)
+
+
+@needs_kernel
 def test_kernel_distances_equal_the_reference():
     cfg = controller_config("snn", node_add_prob=0.3, conn_add_prob=0.5)
     neat = NEAT(cfg, seeds=[0, 1])
