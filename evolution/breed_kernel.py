@@ -363,11 +363,11 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
 }                                                                                                 \
 /* map: the weight and sigma row of each bitset row (NULL: the same row). */                     \
 typedef struct { const uint64_t *bits; const int64_t *before, *cnt, *top; const T *w, *sig; const int64_t *map; } genes_##SFX; \
-/* The compatibility distance of row ra of set a and row rb of set b; or, when the terms     \
-   without weights already reach `bound`, that partial sum (>= bound, and <= the distance:    \
-   the weight term is >= 0 and rounded addition is monotone), skipping the weight term. */   \
-static inline double pair_dist_##SFX(genes_##SFX a, int64_t ra, genes_##SFX b, int64_t rb,      \
-                                     int64_t NN, int64_t W, const double *coef, double bound) { \
+/* The terms of the compatibility distance of row ra of set a and row rb of set b without the  \
+   weights: structure (excess and disjoint) and sigma, and the matching genes. */               \
+typedef struct { double structure, sigma; int64_t match; } terms_##SFX;                          \
+static inline terms_##SFX pair_terms_##SFX(genes_##SFX a, int64_t ra, genes_##SFX b, int64_t rb,  \
+                                           int64_t W, const double *coef) {                      \
     const uint64_t *A = a.bits + ra * W, *B = b.bits + rb * W;                                    \
     const int64_t ta = a.top[ra], tb = b.top[rb];                                                 \
     int64_t match = 0;                                                                            \
@@ -382,11 +382,16 @@ static inline double pair_dist_##SFX(genes_##SFX a, int64_t ra, genes_##SFX b, i
     const double disjoint = na + nb - 2.0 * (double)match - excess;                               \
     const double n_max = na > nb ? na : nb;                                                       \
     const double norm = n_max >= coef[4] ? n_max : 1.0;                                           \
-    const double structure = coef[0] * excess / norm + coef[1] * disjoint / norm;                 \
     const int64_t wra = a.map ? a.map[ra] : ra, wrb = b.map ? b.map[rb] : rb;                      \
-    const double sigma = coef[3] * fabs((double)a.sig[wra] - (double)b.sig[wrb]);                 \
-    const double partial = structure + sigma;                                                     \
-    if (partial >= bound) return partial;                                                         \
+    terms_##SFX t = {coef[0] * excess / norm + coef[1] * disjoint / norm,                         \
+                     coef[3] * fabs((double)a.sig[wra] - (double)b.sig[wrb]), match};             \
+    return t;                                                                                     \
+}                                                                                                 \
+/* The whole distance from its terms: the mean weight difference of the matching genes added. */\
+static inline double pair_full_##SFX(genes_##SFX a, int64_t ra, genes_##SFX b, int64_t rb,      \
+                                     int64_t NN, int64_t W, const double *coef, terms_##SFX t) { \
+    const uint64_t *A = a.bits + ra * W, *B = b.bits + rb * W;                                    \
+    const int64_t wra = a.map ? a.map[ra] : ra, wrb = b.map ? b.map[rb] : rb;                      \
     double wdiff = 0.0;                                                                           \
     const T *wa = a.w + wra * NN, *wb = b.w + wrb * NN;                                           \
     for (int64_t k = 0; k < W; ++k)                                                               \
@@ -394,8 +399,17 @@ static inline double pair_dist_##SFX(genes_##SFX a, int64_t ra, genes_##SFX b, i
             const int64_t s = k * 64 + __builtin_ctzll(both);                                     \
             wdiff += fabs((double)wa[s] - (double)wb[s]);                                         \
         }                                                                                         \
-    const double w_mean = match > 0 ? wdiff / (double)match : 0.0;                                \
-    return structure + coef[2] * w_mean + sigma;                                                  \
+    const double w_mean = t.match > 0 ? wdiff / (double)t.match : 0.0;                            \
+    return t.structure + coef[2] * w_mean + t.sigma;                                              \
+}                                                                                                 \
+/* The compatibility distance; or, when the terms without weights already reach `bound`, that  \
+   partial sum (>= bound, and <= the distance: the weight term is >= 0 and rounded addition is \
+   monotone), skipping the weight term. */                                                     \
+static inline double pair_dist_##SFX(genes_##SFX a, int64_t ra, genes_##SFX b, int64_t rb,      \
+                                     int64_t NN, int64_t W, const double *coef, double bound) { \
+    const terms_##SFX t = pair_terms_##SFX(a, ra, b, rb, W, coef);                                \
+    const double partial = t.structure + t.sigma;                                                 \
+    return partial >= bound ? partial : pair_full_##SFX(a, ra, b, rb, NN, W, coef, t);            \
 }                                                                                                 \
 /* Distances between genome rows a[r, i] and b[r, j] (rows index the sets' flat arrays). */     \
 void distances_##SFX(const uint64_t *bits_a, const int64_t *pre_a, const int64_t *cnt_a, const int64_t *top_a,\
@@ -432,13 +446,21 @@ void assign_species_##SFX(const uint64_t *g_bits, const int64_t *g_pre, const in
         int64_t *sp = species + r * P;                                                            \
         uint8_t *tk = taken + r * (S + P);                                                        \
         memset(tk, 0, S + P);                                                                     \
+        int64_t live[S > 0 ? S : 1], n_live = 0;                                                  \
+        for (int64_t s = 0; s < S; ++s) if (alive[r * S + s]) live[n_live++] = s;                 \
+        terms_##SFX terms[n_live > 0 ? n_live : 1];                                               \
         for (int64_t p = 0; p < P; ++p) {                                                         \
+            /* Every representative's terms first (independent, so they overlap), then the      \
+               choice in slot order, adding the weight term only where it can still matter:     \
+               pair_dist's result, one representative at a time. */                             \
+            for (int64_t q = 0; q < n_live; ++q)                                                  \
+                terms[q] = pair_terms_##SFX(g, r * P + p, rep, r * S + live[q], W, coef);         \
             double best = INFINITY; int64_t bk = -1;                                              \
-            for (int64_t s = 0; s < S; ++s) {                                                     \
-                if (!alive[r * S + s]) continue;                                                  \
-                const double d = pair_dist_##SFX(g, r * P + p, rep, r * S + s, NN, W, coef,       \
-                                                 best < thr ? best : thr);                        \
-                if (d < best) { best = d; bk = s; }                                               \
+            for (int64_t q = 0; q < n_live; ++q) {                                                \
+                const double bound = best < thr ? best : thr, partial = terms[q].structure + terms[q].sigma;\
+                const double d = partial >= bound ? partial                                       \
+                    : pair_full_##SFX(g, r * P + p, rep, r * S + live[q], NN, W, coef, terms[q]); \
+                if (d < best) { best = d; bk = live[q]; }                                         \
             }                                                                                     \
             sp[p] = best < thr ? bk : -1;                                                         \
             if (sp[p] >= 0) tk[sp[p]] = 1;                                                        \
