@@ -1,6 +1,7 @@
 """The C breeding kernels against the tensor reference, and the counter-based streams."""
 
 import dataclasses
+import shutil
 
 import numpy as np
 import pytest
@@ -15,11 +16,19 @@ from evolution.neat import NEAT
 from evolution.reproduce import allocate_offspring, reproduce, select_parents, update_stagnation
 from evolution.rng import RunRNG, _cos_2pi, _log_unit, _sqrt, box_muller
 from evolution.speciate import SpeciesState, empty_species, speciate
+from snn_torch._cbuild import kernels_enabled
 from tasks.experiments.cartpole import controller_config
 from tasks.xor import XOR_CONFIG
 from tests.evolution.helpers import population, small_config
 
 needs_kernel = pytest.mark.skipif(not breed_kernel.kernel_available(), reason="no C compiler: kernels unavailable")
+
+
+@pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None, reason="no C compiler")
+@pytest.mark.skipif(not kernels_enabled(), reason="kernels disabled (SNN_NEAT_FUSED=0)")
+def test_the_kernels_compile_where_a_compiler_is():
+    # Else every kernel test would skip, and a kernel that no longer compiles would pass CI.
+    assert breed_kernel.kernel_available() and select_kernel.kernel_available()
 
 
 def _equal_state(a: NEAT, b: NEAT) -> None:
