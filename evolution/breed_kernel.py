@@ -117,6 +117,7 @@ static inline int64_t pick_k(double u, int64_t n) {
     return k > n - 1 ? n - 1 : (k < 0 ? 0 : k);
 }
 
+#define VECTOR_REPS 3 /* species assignment: vector loops over at least this many representatives */
 enum { JOB_CONN, JOB_PERTURB, JOB_REPLACE, JOB_SIGMA }; /* what a phase-2 normal is for */
 #define DEFINE_BREED(T, SFX)                                                                      \
 static inline T clampT_##SFX(T x, T lo, T hi) { x = x < lo ? lo : x; return x > hi ? hi : x; }   \
@@ -448,18 +449,62 @@ void assign_species_##SFX(const uint64_t *g_bits, const int64_t *g_pre, const in
         memset(tk, 0, S + P);                                                                     \
         int64_t live[S > 0 ? S : 1], n_live = 0;                                                  \
         for (int64_t s = 0; s < S; ++s) if (alive[r * S + s]) live[n_live++] = s;                 \
-        terms_##SFX terms[n_live > 0 ? n_live : 1];                                               \
+        /* The living representatives, one array per field (and per bitset word), so that the   \
+           terms of a genome against all of them are vector loops; pair_terms's arithmetic. */  \
+        const int64_t L = n_live > 0 ? n_live : 1;                                                \
+        char *soa = malloc(L * (2 * W * sizeof(uint64_t) + 3 * sizeof(int64_t) + 4 * sizeof(double)));\
+        uint64_t *rbits = (uint64_t *)soa; int64_t *rbefore = (int64_t *)(rbits + W * L);         \
+        int64_t *rtop = rbefore + W * L, *mt = rtop + L, *pad = mt + L; (void)pad;                \
+        double *rcnt = (double *)(pad + L), *rsig = rcnt + L, *st = rsig + L, *sg = st + L;       \
+        for (int64_t q = 0; q < n_live; ++q) {                                                    \
+            const int64_t rq = r * S + live[q];                                                   \
+            for (int64_t k = 0; k < W; ++k) {                                                     \
+                rbits[k * L + q] = rep.bits[rq * W + k]; rbefore[k * L + q] = rep.before[rq * W + k];\
+            }                                                                                     \
+            rtop[q] = rep.top[rq]; rcnt[q] = (double)rep.cnt[rq];                                 \
+            rsig[q] = (double)rep.sig[rep.map ? rep.map[rq] : rq];                                \
+        }                                                                                         \
         for (int64_t p = 0; p < P; ++p) {                                                         \
-            /* Every representative's terms first (independent, so they overlap), then the      \
-               choice in slot order, adding the weight term only where it can still matter:     \
-               pair_dist's result, one representative at a time. */                             \
-            for (int64_t q = 0; q < n_live; ++q)                                                  \
-                terms[q] = pair_terms_##SFX(g, r * P + p, rep, r * S + live[q], W, coef);         \
+            /* Every representative's terms first (vector loops), then the choice in slot order, \
+               adding the weight term only where it can still matter: pair_dist's result, one   \
+               representative at a time. */                                                    \
+            const int64_t ra = r * P + p, ta = g.top[ra];                                         \
+            const uint64_t *A = g.bits + ra * W; const int64_t *Abefore = g.before + ra * W;      \
+            const double na = (double)g.cnt[ra], sa = (double)g.sig[g.map ? g.map[ra] : ra];      \
+            if (n_live < VECTOR_REPS) { /* too few for vectors: pair_terms itself */               \
+                for (int64_t q = 0; q < n_live; ++q) {                                            \
+                    const terms_##SFX t = pair_terms_##SFX(g, ra, rep, r * S + live[q], W, coef); \
+                    st[q] = t.structure; sg[q] = t.sigma; mt[q] = t.match;                        \
+                }                                                                                 \
+            } else {                                                                              \
+            for (int64_t q = 0; q < n_live; ++q) mt[q] = 0;                                       \
+            for (int64_t k = 0; k < W; ++k) {                                                     \
+                const uint64_t a = A[k], *col = rbits + k * L;                                    \
+                for (int64_t q = 0; q < n_live; ++q) mt[q] += __builtin_popcountll(a & col[q]);   \
+            }                                                                                     \
+            const int64_t wa = ta < 0 ? 0 : ta / 64;                                              \
+            const uint64_t ma = ta < 0 ? 0 : (ta % 64 == 63 ? ~0ULL : (2ULL << (ta % 64)) - 1);   \
+            const uint64_t *bw = rbits + wa * L; const int64_t *bb = rbefore + wa * L;            \
+            for (int64_t q = 0; q < n_live; ++q) {                                                \
+                const int64_t tb = rtop[q], wb = tb < 0 ? 0 : tb / 64;                            \
+                const uint64_t mb = tb < 0 ? 0 : (tb % 64 == 63 ? ~0ULL : (2ULL << (tb % 64 == 63 ? 0 : tb % 64)) - 1);\
+                const int64_t a_upto = tb < 0 ? 0 : Abefore[wb] + __builtin_popcountll(A[wb] & mb);\
+                const int64_t b_upto = ta < 0 ? 0 : bb[q] + __builtin_popcountll(bw[q] & ma);     \
+                const double nb = rcnt[q];                                                        \
+                const double excess = (na - (double)a_upto) + (nb - (double)b_upto);              \
+                const double disjoint = na + nb - 2.0 * (double)mt[q] - excess;                   \
+                const double n_max = na > nb ? na : nb;                                           \
+                const double norm = n_max >= coef[4] ? n_max : 1.0;                               \
+                st[q] = coef[0] * excess / norm + coef[1] * disjoint / norm;                      \
+                sg[q] = coef[3] * fabs(sa - rsig[q]);                                             \
+            }                                                                                     \
+            }                                                                                     \
             double best = INFINITY; int64_t bk = -1;                                              \
             for (int64_t q = 0; q < n_live; ++q) {                                                \
-                const double bound = best < thr ? best : thr, partial = terms[q].structure + terms[q].sigma;\
-                const double d = partial >= bound ? partial                                       \
-                    : pair_full_##SFX(g, r * P + p, rep, r * S + live[q], NN, W, coef, terms[q]); \
+                const double bound = best < thr ? best : thr, partial = st[q] + sg[q];            \
+                if (partial >= bound) { if (partial < best) { best = partial; bk = live[q]; } continue; }\
+                const terms_##SFX t = {st[q], sg[q], mt[q]};                                      \
+                const double d = pair_full_##SFX(g, ra, rep, r * S + live[q], NN, W, coef, t);    \
                 if (d < best) { best = d; bk = live[q]; }                                         \
             }                                                                                     \
             sp[p] = best < thr ? bk : -1;                                                         \
@@ -475,6 +520,7 @@ void assign_species_##SFX(const uint64_t *g_bits, const int64_t *g_pre, const in
                 if (sp[q] < 0 && pair_dist_##SFX(g, r * P + q, g, r * P + p, NN, W, coef, thr) < thr) sp[q] = slot; \
         }                                                                                         \
         n_founded[r] = n;                                                                         \
+        free(soa);                                                                                \
     }                                                                                             \
 }
 DEFINE_BREED(float, f32)
@@ -499,10 +545,13 @@ void touched_nodes(const uint8_t *conn, const uint8_t *alive, int64_t R, int64_t
     for (int64_t q = 0; q < R * S; ++q) {
         if (!alive[q]) continue;
         const uint8_t *c = conn + q * N * N;
-        uint8_t *o = out + (q / S) * N;
-        for (int64_t i = 0; i < N; ++i)
-            for (int64_t j = 0; j < N; ++j)
-                if (c[i * N + j]) { o[i] = 1; o[j] = 1; }
+        uint8_t *o = out + (q / S) * N, col[MAX_ROWS] = {0};
+        for (int64_t i = 0; i < N; ++i) { /* branch-free: a row's OR, and the columns' ORs */
+            uint8_t row = 0;
+            for (int64_t j = 0; j < N; ++j) { row |= c[i * N + j]; col[j] |= c[i * N + j]; }
+            o[i] |= row != 0;
+        }
+        for (int64_t j = 0; j < N; ++j) o[j] |= col[j] != 0;
     }
 }
 """

@@ -291,3 +291,15 @@ def test_kernels_refuse_what_they_cannot_take():
     half.weight = half.weight.half()
     with pytest.raises(ValueError, match="float32/float64"):
         breed_kernel.GeneBits(half.conn, half.weight, half.sigma)
+
+
+@needs_kernel
+@pytest.mark.parametrize("R,S,N", [(1, 1, 3), (3, 5, 8), (2, 7, 20), (4, 3, 64)])
+def test_touched_nodes_equal_the_tensor_reference(R, S, N):
+    g = torch.Generator().manual_seed(R * 100 + S * 10 + N)
+    conn = torch.rand(R, S, N, N, generator=g) < 0.3 / N  # sparse: some nodes untouched
+    alive = torch.rand(R, S, generator=g) < 0.7
+    alive[0, 0], conn[0, 0, 0, N - 1] = True, True  # at least one living gene
+    expected = ((conn.any(-1) | conn.any(-2)) & alive[..., None]).any(1)
+    got = breed_kernel.touched_nodes(conn, alive)
+    assert torch.equal(got, expected)
