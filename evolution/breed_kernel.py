@@ -127,13 +127,14 @@ static inline void phase1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *p
                   const uint8_t *active, T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T *cs,     \
                   int64_t *src, int64_t *dst, uint8_t *request, const int64_t *keys,             \
                   const int64_t *base, const int64_t *blocks, int64_t R, int64_t P, int64_t N,   \
-                  double inherit_disabled, double node_add_prob, int64_t parent_row0, int64_t row0,\
+                  double inherit_disabled, double node_add_prob, int64_t idx0, int64_t row0,            \
                   int64_t row1, uint64_t *gbits) {                                                \
     const int64_t NN = N * N, W = (NN + 63) / 64;                                                 \
     for (int64_t row = row0; row < row1; ++row) {                                                   \
         const int64_t r = row / P, p = row % P, crow = row - row0; /* child arrays: the run's block */\
         const uint64_t key = (uint64_t)keys[r], b0 = (uint64_t)base[r];                          \
-        const int64_t a = a_idx[row] - parent_row0, b = b_idx[row] - parent_row0;                 \
+        /* parents: rows of pw (a_idx, b_idx indexed from row idx0) */                           \
+        const int64_t a = a_idx[row - idx0], b = b_idx[row - idx0];                               \
         const T *fw = pw + a * NN, *ow = pw + b * NN;                                             \
         const uint8_t *fc = pc + a * NN, *fe = pe + a * NN, *oc = pc + b * NN, *oe = pe + b * NN; \
         T *w = cw + crow * NN; uint8_t *c = cc + crow * NN, *e = ce + crow * NN;                  \
@@ -326,19 +327,34 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
         T *cw_r = cw + c0 * NN, *cs_r = cs + c0;                                                  \
         uint8_t *cc_r = cc + c0 * NN, *ce_r = ce + c0 * NN, *cn_r = cn + c0 * N;                  \
         const T *pw_r = pw, *ps_r = ps; const uint8_t *pc_r = pc, *pe_r = pe, *pn_r = pn;          \
-        int64_t parent_row0 = 0; char *aside = NULL;                                              \
-        if (dest_runs) {                                                                          \
-            aside = malloc(P * (NN * (sizeof(T) + 2) + N + sizeof(T)));                           \
-            T *w = (T *)aside, *sg = w + P * NN;                                                  \
-            uint8_t *c = (uint8_t *)(sg + P), *e = c + P * NN, *nd = e + P * NN;                  \
-            memcpy(w, pw + c0 * NN, P * NN * sizeof(T)); memcpy(sg, ps + c0, P * sizeof(T));       \
-            memcpy(c, pc + c0 * NN, P * NN); memcpy(e, pe + c0 * NN, P * NN); memcpy(nd, pn + c0 * N, P * N);\
-            pw_r = w; ps_r = sg; pc_r = c; pe_r = e; pn_r = nd; parent_row0 = c0;                 \
+        int64_t idx0 = 0; char *aside = NULL; int64_t *loc = NULL;                                \
+        const int64_t *ia = a_idx, *ib = b_idx;                                                   \
+        if (dest_runs) { /* only the parents (a fifth of the run, say) are copied aside */        \
+            loc = malloc(3 * P * sizeof(int64_t));                                                \
+            int64_t *la = loc, *lb = loc + P, *slot = loc + 2 * P, n_used = 0;                    \
+            for (int64_t q = 0; q < P; ++q) slot[q] = -1;                                         \
+            for (int64_t row = row0; row < row1; ++row) {                                         \
+                const int64_t a = a_idx[row] - c0, b = b_idx[row] - c0;                           \
+                if (slot[a] < 0) slot[a] = n_used++;                                              \
+                if (slot[b] < 0) slot[b] = n_used++;                                              \
+                la[row - row0] = slot[a]; lb[row - row0] = slot[b];                               \
+            }                                                                                     \
+            aside = malloc(n_used * (NN * (sizeof(T) + 2) + N + sizeof(T)));                      \
+            T *w = (T *)aside, *sg = w + n_used * NN;                                             \
+            uint8_t *c = (uint8_t *)(sg + n_used), *e = c + n_used * NN, *nd = e + n_used * NN;   \
+            for (int64_t q = 0; q < P; ++q) {                                                     \
+                const int64_t k = slot[q], from = c0 + q;                                         \
+                if (k < 0) continue;                                                              \
+                memcpy(w + k * NN, pw + from * NN, NN * sizeof(T)); sg[k] = ps[from];             \
+                memcpy(c + k * NN, pc + from * NN, NN); memcpy(e + k * NN, pe + from * NN, NN);   \
+                memcpy(nd + k * N, pn + from * N, N);                                             \
+            }                                                                                     \
+            pw_r = w; ps_r = sg; pc_r = c; pe_r = e; pn_r = nd; ia = la; ib = lb; idx0 = row0;    \
         }                                                                                         \
-        phase1_##SFX(pw_r, pc_r, pe_r, pn_r, ps_r, a_idx, b_idx, do_cross, active, cw_r, cc_r, ce_r, cn_r,\
+        phase1_##SFX(pw_r, pc_r, pe_r, pn_r, ps_r, ia, ib, do_cross, active, cw_r, cc_r, ce_r, cn_r,\
                      cs_r, src, dst, request, keys, base, blocks, R, P, N, inherit_disabled, node_add_prob,\
-                     parent_row0, row0, row1, gbits);                                             \
-        free(aside);                                                                              \
+                     idx0, row0, row1, gbits);                                                    \
+        free(aside); free(loc);                                                                   \
         uint8_t used[MAX_ROWS]; int64_t free_slots[MAX_ROWS], n_free = 0;                         \
         for (int64_t j = 0; j < N; ++j) used[j] = reserved[r * N + j];                            \
         for (int64_t q = 0; q < P; ++q)                                                           \
