@@ -301,83 +301,6 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
     }                                                                                             \
     free(job_counter);                                                                            \
 }                                                                                                 \
-/* One breeding step, a run at a time (its children stay in cache between the phases):            \
-   phase 1 for the run, its node registry (as evolution.innovation.assign_split_nodes:            \
-   distinct splits ranked in slot order take the free hidden slots in ascending order),           \
-   phase 2. */                                                                                    \
-void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_t *pn, const T *ps,\
-                 const int64_t *a_idx, const int64_t *b_idx, const uint8_t *do_cross,             \
-                 const uint8_t *active, T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T *cs,      \
-                 int64_t *src, int64_t *dst, uint8_t *request, const int64_t *keys,               \
-                 const int64_t *base, const int64_t *blocks, int64_t R, int64_t P, int64_t N,     \
-                 double inherit_disabled, double node_add_prob, int64_t *new_node, uint8_t *granted,\
-                 int64_t first_output, int feed_forward, int per_gene, double conn_add_prob,      \
-                 double w_mean, double w_stdev, double w_min, double w_max, double w_rate,        \
-                 double w_rate_sum, double w_replace, double w_power, double s_rate, double s_power,\
-                 double s_min, double s_max, double toggle_rate, const uint8_t *reserved,         \
-                 int64_t first_hidden, const int64_t *dest_runs, uint64_t *gbits, int64_t *gbefore,\
-                 int64_t *gcount, int64_t *gtop, int threads) {                                   \
-    const int64_t NN = N * N, words = (NN + 63) / 64;                                             \
-    _Pragma("omp parallel for schedule(static) num_threads(threads)")                             \
-    for (int64_t r = 0; r < R; ++r) {                                                             \
-        const int64_t row0 = r * P, row1 = row0 + P;                                              \
-        /* dest_runs: the children overwrite their parents' run dest_runs[r] of the parent arrays \
-           (the same arrays as the child ones), so the run's parents are copied aside first. */ \
-        const int64_t c0 = (dest_runs ? dest_runs[r] : r) * P;                                    \
-        T *cw_r = cw + c0 * NN, *cs_r = cs + c0;                                                  \
-        uint8_t *cc_r = cc + c0 * NN, *ce_r = ce + c0 * NN, *cn_r = cn + c0 * N;                  \
-        const T *pw_r = pw, *ps_r = ps; const uint8_t *pc_r = pc, *pe_r = pe, *pn_r = pn;          \
-        int64_t idx0 = 0; char *aside = NULL; int64_t *loc = NULL;                                \
-        const int64_t *ia = a_idx, *ib = b_idx;                                                   \
-        if (dest_runs) { /* only the parents (a fifth of the run, say) are copied aside */        \
-            loc = malloc(3 * P * sizeof(int64_t));                                                \
-            int64_t *la = loc, *lb = loc + P, *slot = loc + 2 * P, n_used = 0;                    \
-            for (int64_t q = 0; q < P; ++q) slot[q] = -1;                                         \
-            for (int64_t row = row0; row < row1; ++row) {                                         \
-                const int64_t a = a_idx[row] - c0, b = b_idx[row] - c0;                           \
-                if (slot[a] < 0) slot[a] = n_used++;                                              \
-                if (slot[b] < 0) slot[b] = n_used++;                                              \
-                la[row - row0] = slot[a]; lb[row - row0] = slot[b];                               \
-            }                                                                                     \
-            aside = malloc(n_used * (NN * (sizeof(T) + 2) + N + sizeof(T)));                      \
-            T *w = (T *)aside, *sg = w + n_used * NN;                                             \
-            uint8_t *c = (uint8_t *)(sg + n_used), *e = c + n_used * NN, *nd = e + n_used * NN;   \
-            for (int64_t q = 0; q < P; ++q) {                                                     \
-                const int64_t k = slot[q], from = c0 + q;                                         \
-                if (k < 0) continue;                                                              \
-                memcpy(w + k * NN, pw + from * NN, NN * sizeof(T)); sg[k] = ps[from];             \
-                memcpy(c + k * NN, pc + from * NN, NN); memcpy(e + k * NN, pe + from * NN, NN);   \
-                memcpy(nd + k * N, pn + from * N, N);                                             \
-            }                                                                                     \
-            pw_r = w; ps_r = sg; pc_r = c; pe_r = e; pn_r = nd; ia = la; ib = lb; idx0 = row0;    \
-        }                                                                                         \
-        phase1_##SFX(pw_r, pc_r, pe_r, pn_r, ps_r, ia, ib, do_cross, active, cw_r, cc_r, ce_r, cn_r,\
-                     cs_r, src, dst, request, keys, base, blocks, R, P, N, inherit_disabled, node_add_prob,\
-                     idx0, row0, row1, gbits);                                                    \
-        free(aside); free(loc);                                                                   \
-        uint8_t used[MAX_ROWS]; int64_t free_slots[MAX_ROWS], n_free = 0;                         \
-        for (int64_t j = 0; j < N; ++j) used[j] = reserved[r * N + j];                            \
-        for (int64_t q = 0; q < P; ++q)                                                           \
-            for (int64_t j = 0; j < N; ++j) used[j] |= cn_r[q * N + j];                           \
-        for (int64_t j = first_hidden; j < N; ++j) if (!used[j]) free_slots[n_free++] = j;        \
-        uint64_t wanted[MAX_SLOTS / 64] = {0};                                                    \
-        for (int64_t row = row0; row < row1; ++row)                                               \
-            if (request[row]) { const int64_t f = src[row] * N + dst[row]; wanted[f / 64] |= 1ULL << (f % 64); }\
-        int64_t before[MAX_SLOTS / 64], n = 0;                                                    \
-        for (int64_t k = 0; k < words; ++k) { before[k] = n; n += __builtin_popcountll(wanted[k]); }\
-        for (int64_t row = row0; row < row1; ++row) {                                             \
-            granted[row] = 0; new_node[row] = 0;                                                  \
-            if (!request[row]) continue;                                                          \
-            const int64_t f = src[row] * N + dst[row];                                            \
-            const int64_t k = before[f / 64] + __builtin_popcountll(wanted[f / 64] & ((1ULL << (f % 64)) - 1));\
-            if (k < n_free) { granted[row] = 1; new_node[row] = free_slots[k]; }                  \
-        }                                                                                         \
-        phase2_##SFX(cw_r, cc_r, ce_r, cn_r, cs_r, new_node, granted, src, dst, active, keys, base, blocks, R, P, N,\
-                     first_output, feed_forward, per_gene, conn_add_prob, w_mean, w_stdev, w_min, w_max,\
-                     w_rate, w_rate_sum, w_replace, w_power, s_rate, s_power, s_min, s_max, toggle_rate,\
-                     row0, row1, gbits, gbefore, gcount, gtop);                                   \
-    }                                                                                             \
-}                                                                                                 \
 /* map: the weight and sigma row of each bitset row (NULL: the same row). */                     \
 typedef struct { const uint64_t *bits; const int64_t *before, *cnt, *top; const T *w, *sig; const int64_t *map; } genes_##SFX; \
 /* The terms of the compatibility distance of row ra of set a and row rb of set b without the  \
@@ -443,6 +366,160 @@ void distances_##SFX(const uint64_t *bits_a, const int64_t *pre_a, const int64_t
             out[q * Kb + jb] = pair_dist_##SFX(a, rows_a[q], b, rows_b[r * Kb + jb], NN, W, coef, INFINITY); \
     }                                                                                             \
 }                                                                                                 \
+/* The closest living representative of run r within thr for genome rows row0 .. row0 + P of  \
+   g (-1: none; first slot on ties): out[0 .. P). */                                            \
+static void nearest_reps_##SFX(genes_##SFX g, int64_t row0, int64_t P, genes_##SFX rep, const uint8_t *alive,\
+                               int64_t r, int64_t S, int64_t NN, int64_t W, const double *coef, double thr,\
+                               int64_t *out) {                                                    \
+    int64_t live[S > 0 ? S : 1], n_live = 0;                                                  \
+    for (int64_t s = 0; s < S; ++s) if (alive[r * S + s]) live[n_live++] = s;                     \
+    /* The living representatives, one array per field (and per bitset word), so that the       \
+       terms of a genome against all of them are vector loops; pair_terms's arithmetic. */      \
+    const int64_t L = n_live > 0 ? n_live : 1;                                                    \
+    char *soa = malloc(L * (2 * W * sizeof(uint64_t) + 3 * sizeof(int64_t) + 4 * sizeof(double)));    \
+    uint64_t *rbits = (uint64_t *)soa; int64_t *rbefore = (int64_t *)(rbits + W * L);             \
+    int64_t *rtop = rbefore + W * L, *mt = rtop + L, *pad = mt + L; (void)pad;                    \
+    double *rcnt = (double *)(pad + L), *rsig = rcnt + L, *st = rsig + L, *sg = st + L;           \
+    for (int64_t q = 0; q < n_live; ++q) {                                                        \
+        const int64_t rq = r * S + live[q];                                                       \
+        for (int64_t k = 0; k < W; ++k) {                                                         \
+            rbits[k * L + q] = rep.bits[rq * W + k]; rbefore[k * L + q] = rep.before[rq * W + k];    \
+        }                                                                                         \
+        rtop[q] = rep.top[rq]; rcnt[q] = (double)rep.cnt[rq];                                     \
+        rsig[q] = (double)rep.sig[rep.map ? rep.map[rq] : rq];                                    \
+    }                                                                                             \
+    for (int64_t p = 0; p < P; ++p) {                                                             \
+        /* Every representative's terms first (vector loops), then the choice in slot order,     \
+           adding the weight term only where it can still matter: pair_dist's result, one       \
+           representative at a time. */                                                        \
+        const int64_t ra = row0 + p, ta = g.top[ra];                                             \
+        const uint64_t *A = g.bits + ra * W; const int64_t *Abefore = g.before + ra * W;          \
+        const double na = (double)g.cnt[ra], sa = (double)g.sig[g.map ? g.map[ra] : ra];          \
+        if (n_live < VECTOR_REPS) { /* too few for vectors: pair_terms itself */                   \
+            for (int64_t q = 0; q < n_live; ++q) {                                                \
+                const terms_##SFX t = pair_terms_##SFX(g, ra, rep, r * S + live[q], W, coef);     \
+                st[q] = t.structure; sg[q] = t.sigma; mt[q] = t.match;                            \
+            }                                                                                     \
+        } else {                                                                                  \
+        for (int64_t q = 0; q < n_live; ++q) mt[q] = 0;                                           \
+        for (int64_t k = 0; k < W; ++k) {                                                         \
+            const uint64_t a = A[k], *col = rbits + k * L;                                        \
+            for (int64_t q = 0; q < n_live; ++q) mt[q] += __builtin_popcountll(a & col[q]);       \
+        }                                                                                         \
+        const int64_t wa = ta < 0 ? 0 : ta / 64;                                                  \
+        const uint64_t ma = ta < 0 ? 0 : (ta % 64 == 63 ? ~0ULL : (2ULL << (ta % 64)) - 1);       \
+        const uint64_t *bw = rbits + wa * L; const int64_t *bb = rbefore + wa * L;                \
+        for (int64_t q = 0; q < n_live; ++q) {                                                    \
+            const int64_t tb = rtop[q], wb = tb < 0 ? 0 : tb / 64;                                \
+            const uint64_t mb = tb < 0 ? 0 : (tb % 64 == 63 ? ~0ULL : (2ULL << (tb % 64 == 63 ? 0 : tb % 64)) - 1);    \
+            const int64_t a_upto = tb < 0 ? 0 : Abefore[wb] + __builtin_popcountll(A[wb] & mb);    \
+            const int64_t b_upto = ta < 0 ? 0 : bb[q] + __builtin_popcountll(bw[q] & ma);         \
+            const double nb = rcnt[q];                                                            \
+            const double excess = (na - (double)a_upto) + (nb - (double)b_upto);                  \
+            const double disjoint = na + nb - 2.0 * (double)mt[q] - excess;                       \
+            const double n_max = na > nb ? na : nb;                                               \
+            const double norm = n_max >= coef[4] ? n_max : 1.0;                                   \
+            st[q] = coef[0] * excess / norm + coef[1] * disjoint / norm;                          \
+            sg[q] = coef[3] * fabs(sa - rsig[q]);                                                 \
+        }                                                                                         \
+        }                                                                                         \
+        double best = INFINITY; int64_t bk = -1;                                                  \
+        for (int64_t q = 0; q < n_live; ++q) {                                                    \
+            const double bound = best < thr ? best : thr, partial = st[q] + sg[q];                \
+            if (partial >= bound) { if (partial < best) { best = partial; bk = live[q]; } continue; }    \
+            const terms_##SFX t = {st[q], sg[q], mt[q]};                                          \
+            const double d = pair_full_##SFX(g, ra, rep, r * S + live[q], NN, W, coef, t);        \
+            if (d < best) { best = d; bk = live[q]; }                                             \
+        }                                                                                         \
+        out[p] = best < thr ? bk : -1;                                                            \
+    }                                                                                             \
+    free(soa);                                                                                    \
+}                                                                                                 \
+/* One breeding step, a run at a time (its children stay in cache between the phases):            \
+   phase 1 for the run, its node registry (as evolution.innovation.assign_split_nodes:            \
+   distinct splits ranked in slot order take the free hidden slots in ascending order),           \
+   phase 2. */                                                                                    \
+void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_t *pn, const T *ps,\
+                 const int64_t *a_idx, const int64_t *b_idx, const uint8_t *do_cross,             \
+                 const uint8_t *active, T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T *cs,      \
+                 int64_t *src, int64_t *dst, uint8_t *request, const int64_t *keys,               \
+                 const int64_t *base, const int64_t *blocks, int64_t R, int64_t P, int64_t N,     \
+                 double inherit_disabled, double node_add_prob, int64_t *new_node, uint8_t *granted,\
+                 int64_t first_output, int feed_forward, int per_gene, double conn_add_prob,      \
+                 double w_mean, double w_stdev, double w_min, double w_max, double w_rate,        \
+                 double w_rate_sum, double w_replace, double w_power, double s_rate, double s_power,\
+                 double s_min, double s_max, double toggle_rate, const uint8_t *reserved,         \
+                 int64_t first_hidden, const int64_t *dest_runs, uint64_t *gbits, int64_t *gbefore,\
+                 int64_t *gcount, int64_t *gtop, const int64_t *gmap, const uint64_t *r_bits,     \
+                 const int64_t *r_pre, const int64_t *r_cnt, const int64_t *r_top, const T *r_w,  \
+                 const T *r_sig, const uint8_t *r_alive, int64_t S, const double *coef, double thr,\
+                 int64_t *nearest, int threads) {                                                 \
+    const int64_t NN = N * N, words = (NN + 63) / 64;                                             \
+    _Pragma("omp parallel for schedule(static) num_threads(threads)")                             \
+    for (int64_t r = 0; r < R; ++r) {                                                             \
+        const int64_t row0 = r * P, row1 = row0 + P;                                              \
+        /* dest_runs: the children overwrite their parents' run dest_runs[r] of the parent arrays \
+           (the same arrays as the child ones), so the run's parents are copied aside first. */ \
+        const int64_t c0 = (dest_runs ? dest_runs[r] : r) * P;                                    \
+        T *cw_r = cw + c0 * NN, *cs_r = cs + c0;                                                  \
+        uint8_t *cc_r = cc + c0 * NN, *ce_r = ce + c0 * NN, *cn_r = cn + c0 * N;                  \
+        const T *pw_r = pw, *ps_r = ps; const uint8_t *pc_r = pc, *pe_r = pe, *pn_r = pn;          \
+        int64_t idx0 = 0; char *aside = NULL; int64_t *loc = NULL;                                \
+        const int64_t *ia = a_idx, *ib = b_idx;                                                   \
+        if (dest_runs) { /* only the parents (a fifth of the run, say) are copied aside */        \
+            loc = malloc(3 * P * sizeof(int64_t));                                                \
+            int64_t *la = loc, *lb = loc + P, *slot = loc + 2 * P, n_used = 0;                    \
+            for (int64_t q = 0; q < P; ++q) slot[q] = -1;                                         \
+            for (int64_t row = row0; row < row1; ++row) {                                         \
+                const int64_t a = a_idx[row] - c0, b = b_idx[row] - c0;                           \
+                if (slot[a] < 0) slot[a] = n_used++;                                              \
+                if (slot[b] < 0) slot[b] = n_used++;                                              \
+                la[row - row0] = slot[a]; lb[row - row0] = slot[b];                               \
+            }                                                                                     \
+            aside = malloc(n_used * (NN * (sizeof(T) + 2) + N + sizeof(T)));                      \
+            T *w = (T *)aside, *sg = w + n_used * NN;                                             \
+            uint8_t *c = (uint8_t *)(sg + n_used), *e = c + n_used * NN, *nd = e + n_used * NN;   \
+            for (int64_t q = 0; q < P; ++q) {                                                     \
+                const int64_t k = slot[q], from = c0 + q;                                         \
+                if (k < 0) continue;                                                              \
+                memcpy(w + k * NN, pw + from * NN, NN * sizeof(T)); sg[k] = ps[from];             \
+                memcpy(c + k * NN, pc + from * NN, NN); memcpy(e + k * NN, pe + from * NN, NN);   \
+                memcpy(nd + k * N, pn + from * N, N);                                             \
+            }                                                                                     \
+            pw_r = w; ps_r = sg; pc_r = c; pe_r = e; pn_r = nd; ia = la; ib = lb; idx0 = row0;    \
+        }                                                                                         \
+        phase1_##SFX(pw_r, pc_r, pe_r, pn_r, ps_r, ia, ib, do_cross, active, cw_r, cc_r, ce_r, cn_r,\
+                     cs_r, src, dst, request, keys, base, blocks, R, P, N, inherit_disabled, node_add_prob,\
+                     idx0, row0, row1, gbits);                                                    \
+        free(aside); free(loc);                                                                   \
+        uint8_t used[MAX_ROWS]; int64_t free_slots[MAX_ROWS], n_free = 0;                         \
+        for (int64_t j = 0; j < N; ++j) used[j] = reserved[r * N + j];                            \
+        for (int64_t q = 0; q < P; ++q)                                                           \
+            for (int64_t j = 0; j < N; ++j) used[j] |= cn_r[q * N + j];                           \
+        for (int64_t j = first_hidden; j < N; ++j) if (!used[j]) free_slots[n_free++] = j;        \
+        uint64_t wanted[MAX_SLOTS / 64] = {0};                                                    \
+        for (int64_t row = row0; row < row1; ++row)                                               \
+            if (request[row]) { const int64_t f = src[row] * N + dst[row]; wanted[f / 64] |= 1ULL << (f % 64); }\
+        int64_t before[MAX_SLOTS / 64], n = 0;                                                    \
+        for (int64_t k = 0; k < words; ++k) { before[k] = n; n += __builtin_popcountll(wanted[k]); }\
+        for (int64_t row = row0; row < row1; ++row) {                                             \
+            granted[row] = 0; new_node[row] = 0;                                                  \
+            if (!request[row]) continue;                                                          \
+            const int64_t f = src[row] * N + dst[row];                                            \
+            const int64_t k = before[f / 64] + __builtin_popcountll(wanted[f / 64] & ((1ULL << (f % 64)) - 1));\
+            if (k < n_free) { granted[row] = 1; new_node[row] = free_slots[k]; }                  \
+        }                                                                                         \
+        phase2_##SFX(cw_r, cc_r, ce_r, cn_r, cs_r, new_node, granted, src, dst, active, keys, base, blocks, R, P, N,\
+                     first_output, feed_forward, per_gene, conn_add_prob, w_mean, w_stdev, w_min, w_max,\
+                     w_rate, w_rate_sum, w_replace, w_power, s_rate, s_power, s_min, s_max, toggle_rate,\
+                     row0, row1, gbits, gbefore, gcount, gtop);                                   \
+        if (nearest) { /* speciate's first step, while the run's children are in cache */         \
+            const genes_##SFX cg = {gbits, gbefore, gcount, gtop, cw, cs, gmap};                  \
+            const genes_##SFX rg = {r_bits, r_pre, r_cnt, r_top, r_w, r_sig, NULL};               \
+            nearest_reps_##SFX(cg, row0, P, rg, r_alive, r, S, NN, words, coef, thr, nearest + row0);\
+        }                                                                                         \
+    }                                                                                             \
+}                                                                                                 \
 /* Species of genomes g[R, P] (speciate's rule): the closest living representative of rep[R, S] \
    within thr, first slot on ties; the rest found species in genome order, each in the lowest \
    slot without members (slots >= S mean the caller must grow), and every genome still without \
@@ -455,7 +532,7 @@ void assign_species_##SFX(const uint64_t *g_bits, const int64_t *g_pre, const in
                           const uint8_t *alive,                                                   \
                           int64_t R, int64_t P, int64_t S, int64_t NN, int64_t W, const double *coef,\
                           double thr, int64_t *species, int64_t *founded, int64_t *n_founded,     \
-                          uint8_t *taken, int threads) {                                          \
+                          uint8_t *taken, const int64_t *nearest, int threads) {                  \
     const genes_##SFX g = {g_bits, g_pre, g_cnt, g_top, g_w, g_sig, g_map};                       \
     const genes_##SFX rep = {r_bits, r_pre, r_cnt, r_top, r_w, r_sig, r_map};                     \
     _Pragma("omp parallel for schedule(static) num_threads(threads)")                            \
@@ -463,67 +540,9 @@ void assign_species_##SFX(const uint64_t *g_bits, const int64_t *g_pre, const in
         int64_t *sp = species + r * P;                                                            \
         uint8_t *tk = taken + r * (S + P);                                                        \
         memset(tk, 0, S + P);                                                                     \
-        int64_t live[S > 0 ? S : 1], n_live = 0;                                                  \
-        for (int64_t s = 0; s < S; ++s) if (alive[r * S + s]) live[n_live++] = s;                 \
-        /* The living representatives, one array per field (and per bitset word), so that the   \
-           terms of a genome against all of them are vector loops; pair_terms's arithmetic. */  \
-        const int64_t L = n_live > 0 ? n_live : 1;                                                \
-        char *soa = malloc(L * (2 * W * sizeof(uint64_t) + 3 * sizeof(int64_t) + 4 * sizeof(double)));\
-        uint64_t *rbits = (uint64_t *)soa; int64_t *rbefore = (int64_t *)(rbits + W * L);         \
-        int64_t *rtop = rbefore + W * L, *mt = rtop + L, *pad = mt + L; (void)pad;                \
-        double *rcnt = (double *)(pad + L), *rsig = rcnt + L, *st = rsig + L, *sg = st + L;       \
-        for (int64_t q = 0; q < n_live; ++q) {                                                    \
-            const int64_t rq = r * S + live[q];                                                   \
-            for (int64_t k = 0; k < W; ++k) {                                                     \
-                rbits[k * L + q] = rep.bits[rq * W + k]; rbefore[k * L + q] = rep.before[rq * W + k];\
-            }                                                                                     \
-            rtop[q] = rep.top[rq]; rcnt[q] = (double)rep.cnt[rq];                                 \
-            rsig[q] = (double)rep.sig[rep.map ? rep.map[rq] : rq];                                \
-        }                                                                                         \
+        if (nearest) memcpy(sp, nearest + r * P, P * sizeof(int64_t)); /* found by breed_ */      \
+        else nearest_reps_##SFX(g, r * P, P, rep, alive, r, S, NN, W, coef, thr, sp);               \
         for (int64_t p = 0; p < P; ++p) {                                                         \
-            /* Every representative's terms first (vector loops), then the choice in slot order, \
-               adding the weight term only where it can still matter: pair_dist's result, one   \
-               representative at a time. */                                                    \
-            const int64_t ra = r * P + p, ta = g.top[ra];                                         \
-            const uint64_t *A = g.bits + ra * W; const int64_t *Abefore = g.before + ra * W;      \
-            const double na = (double)g.cnt[ra], sa = (double)g.sig[g.map ? g.map[ra] : ra];      \
-            if (n_live < VECTOR_REPS) { /* too few for vectors: pair_terms itself */               \
-                for (int64_t q = 0; q < n_live; ++q) {                                            \
-                    const terms_##SFX t = pair_terms_##SFX(g, ra, rep, r * S + live[q], W, coef); \
-                    st[q] = t.structure; sg[q] = t.sigma; mt[q] = t.match;                        \
-                }                                                                                 \
-            } else {                                                                              \
-            for (int64_t q = 0; q < n_live; ++q) mt[q] = 0;                                       \
-            for (int64_t k = 0; k < W; ++k) {                                                     \
-                const uint64_t a = A[k], *col = rbits + k * L;                                    \
-                for (int64_t q = 0; q < n_live; ++q) mt[q] += __builtin_popcountll(a & col[q]);   \
-            }                                                                                     \
-            const int64_t wa = ta < 0 ? 0 : ta / 64;                                              \
-            const uint64_t ma = ta < 0 ? 0 : (ta % 64 == 63 ? ~0ULL : (2ULL << (ta % 64)) - 1);   \
-            const uint64_t *bw = rbits + wa * L; const int64_t *bb = rbefore + wa * L;            \
-            for (int64_t q = 0; q < n_live; ++q) {                                                \
-                const int64_t tb = rtop[q], wb = tb < 0 ? 0 : tb / 64;                            \
-                const uint64_t mb = tb < 0 ? 0 : (tb % 64 == 63 ? ~0ULL : (2ULL << (tb % 64 == 63 ? 0 : tb % 64)) - 1);\
-                const int64_t a_upto = tb < 0 ? 0 : Abefore[wb] + __builtin_popcountll(A[wb] & mb);\
-                const int64_t b_upto = ta < 0 ? 0 : bb[q] + __builtin_popcountll(bw[q] & ma);     \
-                const double nb = rcnt[q];                                                        \
-                const double excess = (na - (double)a_upto) + (nb - (double)b_upto);              \
-                const double disjoint = na + nb - 2.0 * (double)mt[q] - excess;                   \
-                const double n_max = na > nb ? na : nb;                                           \
-                const double norm = n_max >= coef[4] ? n_max : 1.0;                               \
-                st[q] = coef[0] * excess / norm + coef[1] * disjoint / norm;                      \
-                sg[q] = coef[3] * fabs(sa - rsig[q]);                                             \
-            }                                                                                     \
-            }                                                                                     \
-            double best = INFINITY; int64_t bk = -1;                                              \
-            for (int64_t q = 0; q < n_live; ++q) {                                                \
-                const double bound = best < thr ? best : thr, partial = st[q] + sg[q];            \
-                if (partial >= bound) { if (partial < best) { best = partial; bk = live[q]; } continue; }\
-                const terms_##SFX t = {st[q], sg[q], mt[q]};                                      \
-                const double d = pair_full_##SFX(g, ra, rep, r * S + live[q], NN, W, coef, t);    \
-                if (d < best) { best = d; bk = live[q]; }                                         \
-            }                                                                                     \
-            sp[p] = best < thr ? bk : -1;                                                         \
             if (sp[p] >= 0) tk[sp[p]] = 1;                                                        \
         }                                                                                         \
         int64_t n = 0, free_slot = 0;                                                             \
@@ -536,7 +555,6 @@ void assign_species_##SFX(const uint64_t *g_bits, const int64_t *g_pre, const in
                 if (sp[q] < 0 && pair_dist_##SFX(g, r * P + q, g, r * P + p, NN, W, coef, thr) < thr) sp[q] = slot; \
         }                                                                                         \
         n_founded[r] = n;                                                                         \
-        free(soa);                                                                                \
     }                                                                                             \
 }
 DEFINE_BREED(float, f32)
@@ -587,11 +605,12 @@ def kernel_available() -> bool:
             for sfx in ("f32", "f64"):
                 f = getattr(_lib, f"breed_{sfx}")
                 f.restype = None
-                f.argtypes = [P] * 20 + [L] * 3 + [D] * 2 + [P] * 2 + [L] + [C] * 2 + [D] * 14 + [P, L] + [P] * 5 + [C]
+                f.argtypes = ([P] * 20 + [L] * 3 + [D] * 2 + [P] * 2 + [L] + [C] * 2 + [D] * 14 + [P, L] + [P] * 5
+                               + [P] * 8 + [L, P, D, P, C])
                 f = getattr(_lib, f"distances_{sfx}")
                 f.restype, f.argtypes = None, [P] * 8 + [L] + [P] * 8 + [L] * 4 + [P, P, C]
                 f = getattr(_lib, f"assign_species_{sfx}")
-                f.restype, f.argtypes = None, [P] * 15 + [L] * 5 + [P, D] + [P] * 4 + [C]
+                f.restype, f.argtypes = None, [P] * 15 + [L] * 5 + [P, D] + [P] * 5 + [C]
             _lib.normals_check.restype = None
             _lib.normals_check.argtypes = [ctypes.c_uint64, ctypes.c_uint64, L, P]
             _lib.gene_bits.restype = None
@@ -641,8 +660,8 @@ def _require(conn: Tensor, weight: Tensor) -> None:
 
 
 def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: Tensor, cfg: NEATConfig,
-          rng: RunRNG, reserved: Tensor | None, *, runs: Tensor | None = None, in_place: bool = False
-          ) -> tuple[Genomes, Tensor, GeneBits]:
+          rng: RunRNG, reserved: Tensor | None, *, runs: Tensor | None = None, in_place: bool = False,
+          reps: tuple[GeneBits, Tensor, Tensor] | None = None) -> tuple[Genomes, Tensor, GeneBits]:
     """Children ``[R, P]`` of parents ``first`` / ``second`` (``[R, P]`` genome indices of
     ``g``; ``first`` is the fitter where ``do_cross``), mutated where ``active``: the same as
     ``crossover`` then ``mutate_add_node``, ``mutate_add_connection``, ``mutate_weights``,
@@ -651,7 +670,10 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
     ``GeneBits`` (built as the genes are written, so ``speciate`` need not scan them again;
     valid while the children are unchanged). ``runs[R]``: the parents are those runs of ``g``
     (a larger population), read in place; with ``in_place`` the children overwrite them (each
-    run's parents are copied aside first) and ``g`` itself is returned."""
+    run's parents are copied aside first) and ``g`` itself is returned. ``reps``: ``(bits,
+    rep_conn, alive)`` of the species representatives ``[R, S]``; each child's closest living
+    one within the threshold is then found as the run's children are written (speciate's first
+    step, while they are in cache), kept in the returned ``GeneBits`` for ``speciate``."""
     _require(g.conn, g.weight)
     (R, P), N = first.shape, g.num_nodes
     T = g.weight.dtype
@@ -676,6 +698,20 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
     reserved8 = (torch.zeros(R, N, dtype=torch.uint8) if reserved is None
                  else reserved.to(torch.uint8).contiguous())
     words = (N * N + 63) // 64
+    genes = GeneBits.__new__(GeneBits)
+    genes._bind(child.weight, child.sigma, dest)
+    rep_args: list = [None] * 7 + [0, None, 0.0, None]  # reps' bits .. alive, S, coefficients, threshold, out
+    if reps is not None:
+        rep_bits, rep_conn, alive = reps
+        genes.nearest = torch.empty(R, P, dtype=torch.int64)
+        genes.nearest_to = (rep_bits, rep_conn, alive.clone())
+        alive8, coef = alive.to(torch.uint8).contiguous(), _coefficients(cfg)
+        rep_args = [*_genes_args(rep_bits)[:6], alive8.data_ptr(), alive.shape[1], coef.data_ptr(),
+                    float(cfg.compatibility_threshold), genes.nearest.data_ptr()]
+        rep_args[7] = None  # reps are indexed by their own rows
+        rep_args = rep_args[:6] + [alive8.data_ptr()] + rep_args[8:]
+        rep_args = rep_args[:7] + [alive.shape[1], coef.data_ptr(), float(cfg.compatibility_threshold),
+                                   genes.nearest.data_ptr()]
     bits, before = torch.empty(R * P, words, dtype=torch.int64), torch.empty(R * P, words, dtype=torch.int64)
     count, top = torch.empty(R * P, dtype=torch.int64), torch.empty(R * P, dtype=torch.int64)
     getattr(_lib, f"breed_{_sfx(T)}")(
@@ -692,9 +728,8 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
         float(cfg.weight_mutate_power), float(cfg.sigma_mutate_rate), float(cfg.sigma_mutate_power),
         float(cfg.sigma_min_value), float(cfg.sigma_max_value), float(cfg.enabled_mutate_rate),
         reserved8.data_ptr(), cfg.first_hidden, None if dest is None else dest.data_ptr(), bits.data_ptr(),
-        before.data_ptr(), count.data_ptr(), top.data_ptr(), threads)
-    genes = GeneBits.__new__(GeneBits)
-    genes._bind(child.weight, child.sigma, dest)
+        before.data_ptr(), count.data_ptr(), top.data_ptr(), None if genes.map is None else genes.map.data_ptr(),
+        *rep_args, threads)
     genes.bits, genes.before, genes.count, genes.top = bits, before, count, top
     return child, request.bool() & ~granted.bool(), genes
 
@@ -729,6 +764,9 @@ class GeneBits:
             P = weight.shape[1]
             self.map = (runs.to(torch.int64).cpu().unsqueeze(1) * P + torch.arange(P)).flatten().contiguous()
         self.rows = self.weight.shape[0] if self.map is None else self.map.shape[0]
+        # breed's closest representatives (``reps=``), and of which: (bits, rep_conn, alive)
+        self.nearest: Tensor | None = None
+        self.nearest_to: tuple[GeneBits, Tensor, Tensor] | None = None
 
 
 def touched_nodes(conn: Tensor, alive: Tensor) -> Tensor:
@@ -766,13 +804,16 @@ def gene_distances(a: GeneBits, rows_a: Tensor, b: GeneBits, rows_b: Tensor, cfg
     return out
 
 
-def assign_species(genes: GeneBits, reps: GeneBits, alive: Tensor, cfg: NEATConfig) -> tuple[Tensor, Tensor, Tensor]:
+def assign_species(genes: GeneBits, reps: GeneBits, alive: Tensor, cfg: NEATConfig,
+                   nearest: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor]:
     """``speciate``'s assignment for genomes ``genes`` (``R x P`` rows) and representatives
     ``reps`` (``R x S`` rows, ``alive[R, S]``): the closest living representative within the
     threshold, else a new species founded in genome order (``evolution.speciate``).
 
     Returns ``(species [R, P], founded [R, P], n_founded [R])``: run ``r``'s new species are
-    in slots ``founded[r, :n_founded[r]]``, in founding order; a slot >= S asks for growth."""
+    in slots ``founded[r, :n_founded[r]]``, in founding order; a slot >= S asks for growth.
+    ``nearest[R, P]``: each genome's closest representative (-1: none), already found by
+    ``breed(..., reps=)``; only the founding is left."""
     R, S = alive.shape
     P = genes.count.shape[0] // R
     species = torch.empty(R, P, dtype=torch.int64)
@@ -780,8 +821,9 @@ def assign_species(genes: GeneBits, reps: GeneBits, alive: Tensor, cfg: NEATConf
     n_founded = torch.empty(R, dtype=torch.int64)
     taken = torch.empty(R, S + P, dtype=torch.uint8)
     alive8, coef = alive.to(torch.uint8).contiguous(), _coefficients(cfg)
+    near = None if nearest is None else nearest.to(torch.int64).contiguous()
     getattr(_lib, f"assign_species_{_sfx(genes.weight.dtype)}")(
         *_genes_args(genes), *_genes_args(reps), alive8.data_ptr(), R, P, S, genes.nn, genes.words,
         coef.data_ptr(), float(cfg.compatibility_threshold), species.data_ptr(), founded.data_ptr(),
-        n_founded.data_ptr(), taken.data_ptr(), torch.get_num_threads())
+        n_founded.data_ptr(), taken.data_ptr(), None if near is None else near.data_ptr(), torch.get_num_threads())
     return species, founded, n_founded

@@ -122,8 +122,11 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
     reserved = _rep_nodes(sp)
     child_genes = None
     if use_kernels:
-        children, refused, child_genes = breed_kernel.breed(g, first, second, do_cross, active, cfg, rng, reserved, runs=runs,
-                                               in_place=in_place)
+        # The representatives, so that breeding finds each child's closest one (speciate's first step).
+        reps = ((breed_kernel.GeneBits(sp.rep_conn, sp.rep_weight, sp.rep_sigma), sp.rep_conn, sp.alive)
+                if breed_kernel.usable_for_species(sp.rep_conn, sp.rep_weight) else None)
+        children, refused, child_genes = breed_kernel.breed(g, first, second, do_cross, active, cfg, rng, reserved,
+                                                            runs=runs, in_place=in_place, reps=reps)
     else:
         whole = g
         if runs is not None:

@@ -230,8 +230,13 @@ def _assign_by_kernel(g: Genomes, sp: SpeciesState, cfg: NEATConfig, generation:
     elif genes.rows != rows or genes.nn != g.num_nodes ** 2:
         raise ValueError(f"genes describe {genes.rows} genomes of {genes.nn} slots, "
                          f"the genomes are {rows} of {g.num_nodes ** 2}")
-    reps = breed_kernel.GeneBits(sp.rep_conn, sp.rep_weight, sp.rep_sigma)
-    species, founded, n_founded = breed_kernel.assign_species(genes, reps, sp.alive, cfg)
+    near = genes.nearest_to
+    if genes.nearest is not None and near[1] is sp.rep_conn and torch.equal(near[2], sp.alive):
+        # breeding already found each genome's closest representative, of these ones
+        species, founded, n_founded = breed_kernel.assign_species(genes, near[0], sp.alive, cfg, genes.nearest)
+    else:
+        reps = breed_kernel.GeneBits(sp.rep_conn, sp.rep_weight, sp.rep_sigma)
+        species, founded, n_founded = breed_kernel.assign_species(genes, reps, sp.alive, cfg)
     capacity = sp.capacity
     while capacity <= int(species.max()):  # grown by doubling, as _free_slot grows
         capacity *= 2

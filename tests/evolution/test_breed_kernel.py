@@ -172,6 +172,13 @@ def test_bred_gene_bits_are_the_childrens_and_speciate_the_same_with_them(subset
     assert torch.equal(s0, s1) and torch.equal(o0, o1)
     for name, t in sp0.tensors().items():
         assert torch.equal(t, getattr(sp1, name)), name
+    assert bred.nearest is not None  # breeding found the closest representatives ...
+    # ... of these representatives only: with one species gone they are found again
+    gone = SpeciesState(**{**sp.tensors(), "alive": sp.alive.clone()})
+    gone.alive[0, int(torch.nonzero(gone.alive[0])[0])] = False
+    out = [speciate(children, gone, cfg, RunRNG([7] * bred.nearest.shape[0]), 5, fused=True, runs=runs, genes=genes)
+           for genes in (None, bred)]
+    assert torch.equal(out[0][0], out[1][0])
     other = breed_kernel.GeneBits(children.conn[:1], children.weight[:1], children.sigma[:1])
     with pytest.raises(ValueError, match="genes describe"):
         speciate(children, sp, cfg, rng, 5, fused=True, runs=runs, genes=other)
