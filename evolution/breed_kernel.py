@@ -10,11 +10,14 @@ unused ones changes nothing, and the result is the same with any thread count.
 - ``breed``: crossover, add-node (with the run's node registry in between), add-connection,
   weight, sigma and enabled mutations, in the reference's order and with its arithmetic
   (no contraction; float32 genomes round where torch rounds), and the same normals
-  (``evolution.rng.box_muller``), so the children are the same bit for bit.
+  (``evolution.rng.box_muller``), so the children are the same bit for bit. It also writes
+  the children's gene bitsets (``GeneBits``) and, given the representatives, each child's
+  closest one (``speciate``'s first step), while a run's children are still in cache.
 - ``assign_species``: ``speciate``'s rule (closest living representative within the
   threshold, else found a species in genome order) from per-genome gene bitsets: excess,
-  disjoint and matching genes by popcounts, the weight term summed in double and skipped
-  once the other terms reach the bound. ``gene_distances`` gives the distances themselves.
+  disjoint and matching genes by popcounts (against all living representatives at once, as
+  vector loops), the weight term summed in double and skipped once the other terms reach
+  the bound. ``gene_distances`` gives the distances themselves.
   The reference sums the weight term another way (``L1 - a_only - b_only``), so the two
   agree to about 1e-15.
 - ``touched_nodes``: the node slots the living representatives use (the node registry's
