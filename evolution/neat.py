@@ -203,6 +203,7 @@ class NEAT:
             self._report("complete_extinction", [evolving[i] for i in gone])
         species, sp = speciate(children, sp, cfg, rng, self.generation + 1, fused=self.fused_breeding, runs=runs,
                                genes=genes)
+        info.child_genes = None  # used; reporters keep the numbers only
         if all_runs:
             self.genomes, self.species, self.species_state = children, species, sp
         else:

@@ -117,7 +117,8 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
     can run. ``runs``: the genomes are those runs of ``g`` (a larger population; the kernels
     read them in place) and ``sp`` describes those runs. ``genes``: the genomes' gene bitsets
     as ``breed_kernel.breed`` returned them with these genomes (the kernels then skip
-    computing them; ignored by the tensor reference)."""
+    computing them, and take the closest representatives breeding found if it saw these
+    representatives and alive flags; ignored by the tensor reference)."""
     use_kernels = breed_kernel.wanted(g, fused)
     if runs is not None and not use_kernels:
         g, runs = g.select_runs(runs), None
@@ -227,9 +228,9 @@ def _assign_by_kernel(g: Genomes, sp: SpeciesState, cfg: NEATConfig, generation:
     rows = g.num_runs * g.pop_size if runs is None else len(runs) * g.pop_size
     if genes is None:
         genes = breed_kernel.GeneBits(g.conn, g.weight, g.sigma, runs)
-    elif genes.rows != rows or genes.nn != g.num_nodes ** 2:
-        raise ValueError(f"genes describe {genes.rows} genomes of {genes.nn} slots, "
-                         f"the genomes are {rows} of {g.num_nodes ** 2}")
+    elif genes.rows != rows or genes.nn != g.num_nodes ** 2 or genes.weight.data_ptr() != g.weight.data_ptr():
+        raise ValueError(f"genes describe {genes.rows} genomes of {genes.nn} slots, not these "
+                         f"{rows} genomes of {g.num_nodes ** 2}: pass the GeneBits breeding returned with them")
     near = genes.nearest_to
     if genes.nearest is not None and near[1] is sp.rep_conn and torch.equal(near[2], sp.alive):
         # breeding already found each genome's closest representative, of these ones

@@ -180,8 +180,10 @@ def test_bred_gene_bits_are_the_childrens_and_speciate_the_same_with_them(subset
            for genes in (None, bred)]
     assert torch.equal(out[0][0], out[1][0])
     other = breed_kernel.GeneBits(children.conn[:1], children.weight[:1], children.sigma[:1])
-    with pytest.raises(ValueError, match="genes describe"):
-        speciate(children, sp, cfg, rng, 5, fused=True, runs=runs, genes=other)
+    copy = children.clone()  # the same shapes, other genomes
+    for wrong in (other, breed_kernel.GeneBits(copy.conn, copy.weight, copy.sigma, runs)):
+        with pytest.raises(ValueError, match="genes describe"):
+            speciate(children, sp, cfg, rng, 5, fused=True, runs=runs, genes=wrong)
 
 
 @needs_kernel
