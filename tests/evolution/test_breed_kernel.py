@@ -312,3 +312,25 @@ def test_touched_nodes_equal_the_tensor_reference(R, S, N):
     expected = ((conn.any(-1) | conn.any(-2)) & alive[..., None]).any(1)
     got = breed_kernel.touched_nodes(conn, alive)
     assert torch.equal(got, expected)
+
+
+@needs_kernel
+def test_kernels_give_the_same_generations_on_one_thread_and_on_two():
+    # The kernels share runs out among threads; a run's result must not depend on how.
+    cfg = controller_config("snn", node_add_prob=0.2, conn_add_prob=0.3)
+    before = torch.get_num_threads()
+    out = []
+    try:
+        for threads in (1, 2):
+            torch.set_num_threads(threads)
+            neat = NEAT(cfg, seeds=[4, 5, 6])
+            g = torch.Generator().manual_seed(2)
+            for k in range(8):
+                solved = torch.zeros(3, cfg.pop_size, dtype=torch.bool)
+                solved[2, 0] = k == 4  # then a subset breeds in place
+                neat.tell(torch.rand(3, cfg.pop_size, generator=g, dtype=torch.float64) * 16, solved)
+            out.append(neat)
+    finally:
+        torch.set_num_threads(before)
+    _equal_state(*out)
+    assert int(out[0].species_state.alive.sum(1).max()) >= 3  # the vector path of the assignment ran
