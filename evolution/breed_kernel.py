@@ -109,6 +109,18 @@ static inline void bits_summary(const uint64_t *bits, int64_t W, int64_t *before
     }
     *count = n; *top = t;
 }
+/* Bits 0 .. t % 64 of a word (t >= 0): the slots <= t within t's word. */
+static inline uint64_t upto_mask(int64_t t) { return ~0ULL >> (63 - t % 64); }
+/* The compatibility distance's structural term from gene counts: na, nb genes, a_upto of a's
+   genes at slots <= b's highest, b_upto of b's at slots <= a's highest, match in both. */
+static inline double structure_term(double na, double nb, int64_t a_upto, int64_t b_upto, int64_t match,
+                                    const double *coef) {
+    const double excess = (na - (double)a_upto) + (nb - (double)b_upto);
+    const double disjoint = na + nb - 2.0 * (double)match - excess;
+    const double n_max = na > nb ? na : nb;
+    const double norm = n_max >= coef[4] ? n_max : 1.0;
+    return coef[0] * excess / norm + coef[1] * disjoint / norm;
+}
 /* Position of the k-th set bit of x (k < popcount(x)). */
 static inline int kth_bit(uint64_t x, int64_t k) {
     while (k-- > 0) x &= x - 1;
@@ -316,17 +328,10 @@ static inline terms_##SFX pair_terms_##SFX(genes_##SFX a, int64_t ra, genes_##SF
     int64_t match = 0;                                                                            \
     for (int64_t k = 0; k < W; ++k) match += __builtin_popcountll(A[k] & B[k]);                   \
     /* genes of A at slots <= tb, of B at slots <= ta: whole words before, then a mask */         \
-    const int64_t a_upto = tb < 0 ? 0 : a.before[ra * W + tb / 64]                                \
-        + __builtin_popcountll(A[tb / 64] & (tb % 64 == 63 ? ~0ULL : (2ULL << (tb % 64)) - 1));   \
-    const int64_t b_upto = ta < 0 ? 0 : b.before[rb * W + ta / 64]                                \
-        + __builtin_popcountll(B[ta / 64] & (ta % 64 == 63 ? ~0ULL : (2ULL << (ta % 64)) - 1));   \
-    const double na = (double)a.cnt[ra], nb = (double)b.cnt[rb];                                  \
-    const double excess = (na - (double)a_upto) + (nb - (double)b_upto);                          \
-    const double disjoint = na + nb - 2.0 * (double)match - excess;                               \
-    const double n_max = na > nb ? na : nb;                                                       \
-    const double norm = n_max >= coef[4] ? n_max : 1.0;                                           \
+    const int64_t a_upto = tb < 0 ? 0 : a.before[ra * W + tb / 64] + __builtin_popcountll(A[tb / 64] & upto_mask(tb));\
+    const int64_t b_upto = ta < 0 ? 0 : b.before[rb * W + ta / 64] + __builtin_popcountll(B[ta / 64] & upto_mask(ta));\
     const int64_t wra = a.map ? a.map[ra] : ra, wrb = b.map ? b.map[rb] : rb;                      \
-    terms_##SFX t = {coef[0] * excess / norm + coef[1] * disjoint / norm,                         \
+    terms_##SFX t = {structure_term((double)a.cnt[ra], (double)b.cnt[rb], a_upto, b_upto, match, coef),\
                      coef[3] * fabs((double)a.sig[wra] - (double)b.sig[wrb]), match};             \
     return t;                                                                                     \
 }                                                                                                 \
@@ -379,10 +384,10 @@ static void nearest_reps_##SFX(genes_##SFX g, int64_t row0, int64_t P, genes_##S
     /* The living representatives, one array per field (and per bitset word), so that the       \
        terms of a genome against all of them are vector loops; pair_terms's arithmetic. */      \
     const int64_t L = n_live > 0 ? n_live : 1;                                                    \
-    char *soa = malloc(L * (2 * W * sizeof(uint64_t) + 3 * sizeof(int64_t) + 4 * sizeof(double)));    \
+    char *soa = malloc(L * (2 * W * sizeof(uint64_t) + 2 * sizeof(int64_t) + 4 * sizeof(double)));    \
     uint64_t *rbits = (uint64_t *)soa; int64_t *rbefore = (int64_t *)(rbits + W * L);             \
-    int64_t *rtop = rbefore + W * L, *mt = rtop + L, *pad = mt + L; (void)pad;                    \
-    double *rcnt = (double *)(pad + L), *rsig = rcnt + L, *st = rsig + L, *sg = st + L;           \
+    int64_t *rtop = rbefore + W * L, *mt = rtop + L; /* mt: matching genes */                     \
+    double *rcnt = (double *)(mt + L), *rsig = rcnt + L, *st = rsig + L, *sg = st + L;            \
     for (int64_t q = 0; q < n_live; ++q) {                                                        \
         const int64_t rq = r * S + live[q];                                                       \
         for (int64_t k = 0; k < W; ++k) {                                                         \
@@ -404,27 +409,21 @@ static void nearest_reps_##SFX(genes_##SFX g, int64_t row0, int64_t P, genes_##S
                 st[q] = t.structure; sg[q] = t.sigma; mt[q] = t.match;                            \
             }                                                                                     \
         } else {                                                                                  \
-        for (int64_t q = 0; q < n_live; ++q) mt[q] = 0;                                           \
-        for (int64_t k = 0; k < W; ++k) {                                                         \
-            const uint64_t a = A[k], *col = rbits + k * L;                                        \
-            for (int64_t q = 0; q < n_live; ++q) mt[q] += __builtin_popcountll(a & col[q]);       \
-        }                                                                                         \
-        const int64_t wa = ta < 0 ? 0 : ta / 64;                                                  \
-        const uint64_t ma = ta < 0 ? 0 : (ta % 64 == 63 ? ~0ULL : (2ULL << (ta % 64)) - 1);       \
-        const uint64_t *bw = rbits + wa * L; const int64_t *bb = rbefore + wa * L;                \
-        for (int64_t q = 0; q < n_live; ++q) {                                                    \
-            const int64_t tb = rtop[q], wb = tb < 0 ? 0 : tb / 64;                                \
-            const uint64_t mb = tb < 0 ? 0 : (tb % 64 == 63 ? ~0ULL : (2ULL << (tb % 64 == 63 ? 0 : tb % 64)) - 1);    \
-            const int64_t a_upto = tb < 0 ? 0 : Abefore[wb] + __builtin_popcountll(A[wb] & mb);    \
-            const int64_t b_upto = ta < 0 ? 0 : bb[q] + __builtin_popcountll(bw[q] & ma);         \
-            const double nb = rcnt[q];                                                            \
-            const double excess = (na - (double)a_upto) + (nb - (double)b_upto);                  \
-            const double disjoint = na + nb - 2.0 * (double)mt[q] - excess;                       \
-            const double n_max = na > nb ? na : nb;                                               \
-            const double norm = n_max >= coef[4] ? n_max : 1.0;                                   \
-            st[q] = coef[0] * excess / norm + coef[1] * disjoint / norm;                          \
-            sg[q] = coef[3] * fabs(sa - rsig[q]);                                                 \
-        }                                                                                         \
+            for (int64_t q = 0; q < n_live; ++q) mt[q] = 0;                                       \
+            for (int64_t k = 0; k < W; ++k) {                                                     \
+                const uint64_t a = A[k], *col = rbits + k * L;                                    \
+                for (int64_t q = 0; q < n_live; ++q) mt[q] += __builtin_popcountll(a & col[q]);   \
+            }                                                                                     \
+            const int64_t wa = ta < 0 ? 0 : ta / 64;                                              \
+            const uint64_t ma = ta < 0 ? 0 : upto_mask(ta);                                       \
+            const uint64_t *bw = rbits + wa * L; const int64_t *bb = rbefore + wa * L;            \
+            for (int64_t q = 0; q < n_live; ++q) {                                                \
+                const int64_t tb = rtop[q], wb = tb < 0 ? 0 : tb / 64;                            \
+                const int64_t a_upto = tb < 0 ? 0 : Abefore[wb] + __builtin_popcountll(A[wb] & upto_mask(tb));\
+                const int64_t b_upto = ta < 0 ? 0 : bb[q] + __builtin_popcountll(bw[q] & ma);     \
+                st[q] = structure_term(na, rcnt[q], a_upto, b_upto, mt[q], coef);                 \
+                sg[q] = coef[3] * fabs(sa - rsig[q]);                                             \
+            }                                                                                     \
         }                                                                                         \
         double best = INFINITY; int64_t bk = -1;                                                  \
         for (int64_t q = 0; q < n_live; ++q) {                                                    \
@@ -711,10 +710,6 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
         alive8, coef = alive.to(torch.uint8).contiguous(), _coefficients(cfg)
         rep_args = [*_genes_args(rep_bits)[:6], alive8.data_ptr(), alive.shape[1], coef.data_ptr(),
                     float(cfg.compatibility_threshold), genes.nearest.data_ptr()]
-        rep_args[7] = None  # reps are indexed by their own rows
-        rep_args = rep_args[:6] + [alive8.data_ptr()] + rep_args[8:]
-        rep_args = rep_args[:7] + [alive.shape[1], coef.data_ptr(), float(cfg.compatibility_threshold),
-                                   genes.nearest.data_ptr()]
     bits, before = torch.empty(R * P, words, dtype=torch.int64), torch.empty(R * P, words, dtype=torch.int64)
     count, top = torch.empty(R * P, dtype=torch.int64), torch.empty(R * P, dtype=torch.int64)
     getattr(_lib, f"breed_{_sfx(T)}")(
