@@ -81,7 +81,9 @@ def allocate_offspring(fitness: Tensor, species: Tensor, survivors: Tensor, pop_
     share = torch.where(survivors, total_f / size.clamp_min(1) - f_min, 0.0).clamp_min(0.0)
     total = share.sum(1, keepdim=True)
     share = torch.where(total > 0, share, survivors.to(dt))
-    total = share.sum(1, keepdim=True).clamp_min(1e-300)
+    # Summed in slot order (cumsum is sequential; sum's order depends on vector width), the
+    # order evolution.select_kernel.species_offspring sums in.
+    total = share.cumsum(1)[:, -1:].clamp_min(1e-300)
     quota = pop_size * share / total
     base = quota.floor()
     remainder = (pop_size - base.sum(1, keepdim=True)).round().long()
@@ -99,9 +101,10 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
 
     Returns ``(children, elite [R, P] bool, species state, info)``. Runs whose species all
     went extinct get ``info.extinct``; their children are meaningless and the caller resets
-    them. ``fused``: select and breed with the C kernels (``evolution.select_kernel``,
-    ``evolution.breed_kernel``, same result) or the tensor operators (``select_parents`` and
-    the operators); by default the kernels wherever they can run (CPU, compiler present).
+    them. ``fused``: stagnation, allocation, selection and breeding by the C kernels
+    (``evolution.select_kernel``, ``evolution.breed_kernel``, same result) or the tensor
+    operators (``update_stagnation``, ``allocate_offspring``, ``select_parents`` and the
+    operators); by default the kernels wherever they can run (CPU, compiler present).
     ``runs``: ``g`` is a larger population and the other arguments describe its runs ``runs``
     (the kernel then reads those runs' parents in place). ``in_place`` (with ``runs``): the
     children replace those runs' genomes in ``g``, which is returned (the kernel writes them
@@ -110,9 +113,14 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
     if in_place and runs is None:
         raise ValueError("in_place needs runs=")
     P = fitness.shape[1]
-    sp, survivors, _ = update_stagnation(fitness, species, sp, cfg, generation)
-    counts = allocate_offspring(fitness, species, survivors, P)
     use_kernels = breed_kernel.wanted(g, fused)
+    if use_kernels:
+        best, last, survivors, counts = select_kernel.species_offspring(
+            fitness, species, sp.alive, sp.best_fitness, sp.last_improved, cfg, generation)
+        sp = SpeciesState(**{**sp.tensors(), "best_fitness": best, "last_improved": last})
+    else:
+        sp, survivors, _ = update_stagnation(fitness, species, sp, cfg, generation)
+        counts = allocate_offspring(fitness, species, survivors, P)
     if use_kernels:
         first, second, do_cross, elite = select_kernel.select_parents(
             fitness, species, survivors, counts, cfg, rng)

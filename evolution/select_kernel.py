@@ -7,6 +7,8 @@ overhead made them a third of a generation's GA work, so these kernels do the sa
 a time (threads share out the runs), with the same draws (addressed by counter,
 ``evolution.rng``) and the same arithmetic, so the results are the same bit for bit.
 
+- ``species_offspring``: the species' records, stagnation, and offspring per species
+  (``update_stagnation`` then ``allocate_offspring``, two dozen tensor operations on ``[R, S]``).
 - ``select_parents``: members sorted by (species, fitness descending, index), the elites,
   the two parents of each child (within the species, or the second from any species' parents
   for interspecies mating), the crossover decision.
@@ -28,7 +30,7 @@ from evolution.population import Genomes
 from evolution.rng import COUNTER_RNG_C, RunRNG
 from snn_torch._cbuild import load_c_library
 
-__all__ = ["kernel_available", "select_parents", "choose_representatives", "SELECTION_DRAWS"]
+__all__ = ["kernel_available", "select_parents", "species_offspring", "choose_representatives", "SELECTION_DRAWS"]
 
 SELECTION_DRAWS = 5  # float64 uniform blocks of P per run: p1, p2, any parent, interspecies, crossover
 
@@ -153,6 +155,82 @@ void choose_representatives_##SFX(const int64_t *species, const uint8_t *conn, c
 }
 DEFINE_REPS(float, f32)
 DEFINE_REPS(double, f64)
+
+/* reproduce's update_stagnation then allocate_offspring, run by run, with the reference's
+   arithmetic: species' best fitness, stagnation, the species_elitism best species protected
+   (stable descending order), then offspring by explicit fitness sharing and largest remainder.
+   The shares' total is summed in slot order, as the reference's cumsum. */
+void species_offspring(const double *fitness, const int64_t *species, const uint8_t *alive,
+                       const double *best_in, const int64_t *last_in, int64_t R, int64_t P, int64_t S,
+                       int64_t generation, int64_t max_stagnation, int64_t species_elitism,
+                       double *best_out, int64_t *last_out, uint8_t *survivors, int64_t *counts, int threads) {
+    _Pragma("omp parallel for schedule(static) num_threads(threads)")
+    for (int64_t r = 0; r < R; ++r) {
+        const double *f = fitness + r * P;
+        const int64_t *sp = species + r * P;
+        const uint8_t *al = alive + r * S;
+        double *best = best_out + r * S; int64_t *last = last_out + r * S, *cnt = counts + r * S;
+        uint8_t *sv = survivors + r * S;
+        double *buf = malloc(5 * S * sizeof(double));
+        double *sf = buf, *size = buf + S, *total_f = buf + 2 * S, *share = buf + 3 * S, *frac = buf + 4 * S;
+        double f_min = INFINITY;
+        for (int64_t s = 0; s < S; ++s) { sf[s] = -INFINITY; size[s] = 0.0; total_f[s] = 0.0; }
+        for (int64_t p = 0; p < P; ++p) { /* genome order, as scatter_add */
+            const int64_t s = sp[p];
+            if (f[p] > sf[s]) sf[s] = f[p];
+            size[s] += 1.0; total_f[s] += f[p];
+            if (f[p] < f_min) f_min = f[p];
+        }
+        for (int64_t s = 0; s < S; ++s) {
+            const int improved = al[s] && sf[s] > best_in[r * S + s];
+            best[s] = improved ? sf[s] : best_in[r * S + s];
+            last[s] = improved ? generation : last_in[r * S + s];
+        }
+        /* protected: the species_elitism first in (alive ? sf : -inf) descending, ties by slot */
+        uint8_t *prot = malloc(S);
+        memset(prot, 0, S);
+        for (int64_t k = 0; k < species_elitism && k < S; ++k) {
+            int64_t pick = -1; double top = 0.0;
+            for (int64_t s = 0; s < S; ++s) {
+                if (prot[s]) continue;
+                const double v = al[s] ? sf[s] : -INFINITY;
+                if (pick < 0 || v > top) { pick = s; top = v; }
+            }
+            prot[pick] = 1;
+        }
+        int any_share = 0;
+        for (int64_t s = 0; s < S; ++s) {
+            const int stagnant = al[s] && generation - last[s] >= max_stagnation;
+            sv[s] = al[s] && (!stagnant || prot[s]);
+        }
+        free(prot);
+        f_min = f_min > 0.0 ? 0.0 : f_min;
+        for (int64_t s = 0; s < S; ++s) {
+            double v = sv[s] ? total_f[s] / (size[s] < 1.0 ? 1.0 : size[s]) - f_min : 0.0;
+            share[s] = v < 0.0 ? 0.0 : v;
+            any_share |= share[s] > 0.0;
+        }
+        double total = 0.0, base_sum = 0.0;
+        for (int64_t s = 0; s < S; ++s) {
+            if (!any_share) share[s] = sv[s] ? 1.0 : 0.0;
+            total += share[s];
+        }
+        total = total < 1e-300 ? 1e-300 : total;
+        for (int64_t s = 0; s < S; ++s) {
+            const double quota = (double)P * share[s] / total, base = floor(quota);
+            base_sum += base; frac[s] = sv[s] ? quota - base : -1.0;
+            cnt[s] = (int64_t)base;
+        }
+        const int64_t remainder = (int64_t)round((double)P - base_sum);
+        for (int64_t s = 0; s < S; ++s) {
+            if (!sv[s]) { cnt[s] = 0; continue; }
+            int64_t rank = 0; /* position in frac descending, ties by slot */
+            for (int64_t t = 0; t < S; ++t) rank += frac[t] > frac[s] || (frac[t] == frac[s] && t < s);
+            cnt[s] += rank < remainder;
+        }
+        free(buf);
+    }
+}
 """
 
 _lib: ctypes.CDLL | None = None
@@ -171,6 +249,8 @@ def kernel_available() -> bool:
             for sfx in ("f32", "f64"):
                 f = getattr(_lib, f"choose_representatives_{sfx}")
                 f.restype, f.argtypes = None, [P] * 7 + [L] * 4 + [P] * 4 + [C]
+            _lib.species_offspring.restype = None
+            _lib.species_offspring.argtypes = [P] * 5 + [L] * 6 + [P] * 4 + [C]
             _lib._typed = True
     return _lib is not None
 
@@ -203,6 +283,27 @@ def select_parents(fitness: Tensor, species: Tensor, survivors: Tensor, counts: 
                         float(cfg.crossover_prob), first.data_ptr(), second.data_ptr(), do_cross.data_ptr(),
                         elite.data_ptr(), torch.get_num_threads())
     return first, second, do_cross.bool(), elite.bool()
+
+
+def species_offspring(fitness: Tensor, species: Tensor, alive: Tensor, best_fitness: Tensor, last_improved: Tensor,
+                      cfg: NEATConfig, generation: int) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """``reproduce``'s ``update_stagnation`` then ``allocate_offspring`` in one call, the same
+    bit for bit: ``fitness[R, P]``, ``species[R, P]``, and the species slots' ``alive``,
+    ``best_fitness`` and ``last_improved`` (``[R, S]``). Returns ``(best_fitness,
+    last_improved, survivors, counts)``, all ``[R, S]``: the updated records, the species
+    kept, and offspring per slot (``P`` in every run with a survivor)."""
+    _require()
+    R, S = alive.shape
+    P = fitness.shape[1]
+    best, last = torch.empty(R, S, dtype=torch.float64), torch.empty(R, S, dtype=torch.int64)
+    survivors, counts = torch.empty(R, S, dtype=torch.uint8), torch.empty(R, S, dtype=torch.int64)
+    f = fitness.to(torch.float64).contiguous()
+    sp, al = species.to(torch.int64).contiguous(), alive.to(torch.uint8).contiguous()
+    b_in, l_in = best_fitness.to(torch.float64).contiguous(), last_improved.to(torch.int64).contiguous()
+    _lib.species_offspring(f.data_ptr(), sp.data_ptr(), al.data_ptr(), b_in.data_ptr(), l_in.data_ptr(), R, P, S,
+                           int(generation), int(cfg.max_stagnation), int(cfg.species_elitism), best.data_ptr(),
+                           last.data_ptr(), survivors.data_ptr(), counts.data_ptr(), torch.get_num_threads())
+    return best, last, survivors.bool(), counts
 
 
 def choose_representatives(g: Genomes, species: Tensor, capacity: int, rng: RunRNG, runs: Tensor | None = None

@@ -121,6 +121,59 @@ def test_selection_kernel_equals_the_tensor_selection(seed, pop, slots, survival
 
 
 @needs_kernel
+@settings(max_examples=80, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), pop=st.integers(2, 160), slots=st.integers(1, 130),
+       fitness_kind=st.sampled_from(["tied", "uniform", "negative", "zero", "wide"]),
+       stagnation=st.integers(1, 20), species_elitism=st.integers(0, 4), generation=st.integers(0, 40))
+def test_species_kernel_equals_stagnation_then_allocation(seed, pop, slots, fitness_kind, stagnation,
+                                                          species_elitism, generation):
+    # Dead and stagnant slots, members of dead slots, ties in fitness (the protected species
+    # and the largest remainders go by slot), negative and all-zero fitness (shares shifted,
+    # or split evenly), fitness spread over many orders of magnitude (the shares' sum order),
+    # and up to 130 slots (longer than any vector width).
+    cfg = dataclasses.replace(small_config(pop_size=pop), max_stagnation=stagnation, species_elitism=species_elitism)
+    g = torch.Generator().manual_seed(seed)
+    R = 4
+    species = torch.randint(0, slots, (R, pop), generator=g)
+    fitness = {"tied": lambda: torch.randint(0, 4, (R, pop), generator=g).double(),
+               "uniform": lambda: torch.rand(R, pop, generator=g, dtype=torch.float64),
+               "negative": lambda: torch.rand(R, pop, generator=g, dtype=torch.float64) * 10 - 7,
+               "zero": lambda: torch.zeros(R, pop, dtype=torch.float64),
+               "wide": lambda: 10 ** (torch.rand(R, pop, generator=g, dtype=torch.float64) * 12 - 4)}[fitness_kind]()
+    sp = empty_species(R, 2, slots, device=torch.device("cpu"), dtype=torch.float32)
+    sp.alive[:] = torch.rand(R, slots, generator=g) < 0.8
+    sp.alive.scatter_(1, species[:, : pop // 2], True)
+    sp.best_fitness[:] = torch.where(torch.rand(R, slots, generator=g) < 0.3, -torch.inf,
+                                     torch.rand(R, slots, generator=g, dtype=torch.float64))
+    sp.last_improved[:] = torch.randint(-30, generation + 1, (R, slots), generator=g)
+    ref_sp, ref_survivors, _ = update_stagnation(fitness, species, sp, cfg, generation)
+    ref_counts = allocate_offspring(fitness, species, ref_survivors, pop)
+    best, last, survivors, counts = select_kernel.species_offspring(fitness, species, sp.alive, sp.best_fitness,
+                                                                   sp.last_improved, cfg, generation)
+    assert torch.equal(best, ref_sp.best_fitness)
+    assert torch.equal(last, ref_sp.last_improved)
+    assert torch.equal(survivors, ref_survivors)
+    assert torch.equal(counts, ref_counts)
+    assert (counts.sum(1) == torch.where(survivors.any(1), pop, 0)).all()
+
+
+@needs_kernel
+def test_species_kernel_sums_the_shares_in_the_references_order():
+    # Five species of equal-valued members: the largest remainders depend on the last bit of
+    # the shares' total, and a vector-order sum of these five shares gives [50, 31, 15, 50, 4].
+    sizes, values = [21, 24, 38, 36, 31], [1.1, 0.7, 1 / 3, 1.1, 0.1]
+    species = torch.tensor([[s for s, n in enumerate(sizes) for _ in range(n)]])
+    fitness = torch.tensor([[values[s] for s, n in enumerate(sizes) for _ in range(n)]], dtype=torch.float64)
+    alive = torch.ones(1, 5, dtype=torch.bool)
+    counts = allocate_offspring(fitness, species, alive, 150)
+    assert counts.tolist() == [[49, 31, 15, 50, 5]]
+    cfg = small_config(pop_size=150)
+    *_, kernel_counts = select_kernel.species_offspring(fitness, species, alive, torch.full((1, 5), -torch.inf,
+                                                        dtype=torch.float64), torch.zeros(1, 5, dtype=torch.long), cfg, 0)
+    assert torch.equal(kernel_counts, counts)
+
+
+@needs_kernel
 def test_speciating_runs_in_place_equals_speciating_a_copy_of_them():
     cfg = dataclasses.replace(XOR_CONFIG, node_add_prob=0.3, conn_add_prob=0.3)
     neat = NEAT(cfg, seeds=[1, 2, 3, 4])
