@@ -29,7 +29,7 @@ from evolution.checkpoint import (
     load_checkpoint_dict,
 )
 from evolution.config import ConfigError, NEATConfig
-from evolution.population import Genomes, initial_genomes
+from evolution.population import Genomes, InvariantError, check_invariants, initial_genomes
 from evolution.reporters import BaseReporter
 from evolution.reproduce import ReproductionInfo, reproduce
 from evolution.rng import RunRNG
@@ -331,6 +331,10 @@ class NEAT:
         R, P, N = self.num_runs, config.pop_size, config.num_nodes
         if tuple(self.genomes.weight.shape) != (R, P, N, N) or tuple(self.species.shape) != (R, P):
             raise CheckpointError(f"checkpoint {name!r} is malformed: tensor shapes do not match its config")
+        try:  # the distances and the kernels rely on them (no gene: weight 0), so a damaged population stops here
+            check_invariants(self.genomes, config)
+        except InvariantError as exc:
+            raise CheckpointError(f"checkpoint {name!r} is malformed: its population breaks an invariant ({exc})") from exc
         return self
 
 

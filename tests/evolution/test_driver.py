@@ -158,6 +158,22 @@ def test_corrupted_or_truncated_checkpoint_names_the_file(tmp_path):
         NEAT.restore(tmp_path / "missing.pt")
 
 
+def test_a_checkpoint_whose_population_breaks_an_invariant_is_refused():
+    # The compatibility distances take a weight where no gene is as a weight difference, and
+    # the kernels as none (evolution.distance), so such a population would speciate
+    # differently on the two paths, silently; restoring refuses it instead.
+    state = NEAT(CFG, seeds=[1]).state_dict()
+    conn = state["genomes"]["conn"]
+    i, j = (~conn[0, 0]).nonzero()[0].tolist()
+    state["genomes"]["weight"][0, 0, i, j] = 0.5
+    with pytest.raises(CheckpointError, match="non-zero where no gene"):
+        NEAT.from_state_dict(state, name="damaged")
+    state = NEAT(CFG, seeds=[1]).state_dict()
+    state["genomes"]["enabled"][0, 0, i, j] = True
+    with pytest.raises(CheckpointError, match="enabled but does not exist"):
+        NEAT.from_state_dict(state, name="damaged")
+
+
 def test_a_crash_while_writing_keeps_the_previous_checkpoint(tmp_path, monkeypatch):
     neat = NEAT(CFG, seeds=[1])
     path = neat.save_checkpoint(tmp_path / "cp.pt")
