@@ -17,7 +17,7 @@ from torch import Tensor
 from evolution import breed_kernel, select_kernel
 from evolution.config import NEATConfig
 from evolution.distance import distance, gene_stats
-from evolution.population import Genomes
+from evolution.population import Genomes, run_index
 from evolution.rng import RunRNG
 
 __all__ = ["SpeciesState", "empty_species", "speciate"]
@@ -64,7 +64,9 @@ class SpeciesState:
         return SpeciesState(**out)
 
     def select_runs(self, runs: Tensor | list[int]) -> SpeciesState:
-        return SpeciesState(**{k: v[runs] for k, v in self.tensors().items()})
+        """A copy of runs ``runs`` (indices, or an ``[R]`` bool mask)."""
+        idx = run_index(runs, self.alive.device)
+        return SpeciesState(**{k: v.index_select(0, idx) for k, v in self.tensors().items()})
 
 
 def empty_species(R: int, N: int, capacity: int, *, device: torch.device, dtype: torch.dtype) -> SpeciesState:
