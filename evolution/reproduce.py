@@ -118,13 +118,11 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
         best, last, survivors, counts = select_kernel.species_offspring(
             fitness, species, sp.alive, sp.best_fitness, sp.last_improved, cfg, generation)
         sp = SpeciesState(**{**sp.tensors(), "best_fitness": best, "last_improved": last})
-    else:
-        sp, survivors, _ = update_stagnation(fitness, species, sp, cfg, generation)
-        counts = allocate_offspring(fitness, species, survivors, P)
-    if use_kernels:
         first, second, do_cross, elite = select_kernel.select_parents(
             fitness, species, survivors, counts, cfg, rng)
     else:
+        sp, survivors, _ = update_stagnation(fitness, species, sp, cfg, generation)
+        counts = allocate_offspring(fitness, species, survivors, P)
         first, second, do_cross, elite = select_parents(fitness, species, survivors, counts, cfg, rng)
     active = ~elite
     reserved = _rep_nodes(sp)

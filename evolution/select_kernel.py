@@ -171,8 +171,9 @@ void species_offspring(const double *fitness, const int64_t *species, const uint
         const uint8_t *al = alive + r * S;
         double *best = best_out + r * S; int64_t *last = last_out + r * S, *cnt = counts + r * S;
         uint8_t *sv = survivors + r * S;
-        double *buf = malloc(5 * S * sizeof(double));
+        double *buf = malloc(5 * S * sizeof(double) + S);
         double *sf = buf, *size = buf + S, *total_f = buf + 2 * S, *share = buf + 3 * S, *frac = buf + 4 * S;
+        uint8_t *prot = (uint8_t *)(buf + 5 * S); /* protected from stagnation */
         double f_min = INFINITY;
         for (int64_t s = 0; s < S; ++s) { sf[s] = -INFINITY; size[s] = 0.0; total_f[s] = 0.0; }
         for (int64_t p = 0; p < P; ++p) { /* genome order, as scatter_add */
@@ -187,7 +188,6 @@ void species_offspring(const double *fitness, const int64_t *species, const uint
             last[s] = improved ? generation : last_in[r * S + s];
         }
         /* protected: the species_elitism first in (alive ? sf : -inf) descending, ties by slot */
-        uint8_t *prot = malloc(S);
         memset(prot, 0, S);
         for (int64_t k = 0; k < species_elitism && k < S; ++k) {
             int64_t pick = -1; double top = 0.0;
@@ -203,7 +203,6 @@ void species_offspring(const double *fitness, const int64_t *species, const uint
             const int stagnant = al[s] && generation - last[s] >= max_stagnation;
             sv[s] = al[s] && (!stagnant || prot[s]);
         }
-        free(prot);
         f_min = f_min > 0.0 ? 0.0 : f_min;
         for (int64_t s = 0; s < S; ++s) {
             double v = sv[s] ? total_f[s] / (size[s] < 1.0 ? 1.0 : size[s]) - f_min : 0.0;
