@@ -254,6 +254,33 @@ def test_kernel_distances_equal_the_reference():
     assert float(ref.std()) > 0.1  # genomes that differ
 
 
+@needs_kernel
+# every norm the larger genome's (min_genes 1), or every norm 1 (50); thresholds that split the genomes
+@pytest.mark.parametrize(("min_genes", "threshold"), [(1, 1.0), (1, 2.0), (50, 3.0), (50, 5.0)])
+def test_species_kernel_equals_the_reference_with_unequal_coefficients(min_genes, threshold):
+    # Many living representatives (the vector path) and unequal excess and disjoint
+    # coefficients, so that a swapped or dropped term shows.
+    cfg = controller_config("snn", node_add_prob=0.3, conn_add_prob=0.5, compatibility_excess_coefficient=1.3,
+                            compatibility_disjoint_coefficient=0.6, compatibility_weight_coefficient=0.45,
+                            compatibility_sigma_coefficient=3.0, compatibility_normalize_min_genes=min_genes,
+                            compatibility_threshold=threshold)
+    neat = NEAT(cfg, seeds=[0, 1])
+    for k in range(6):
+        neat.tell(torch.rand(2, cfg.pop_size, generator=torch.Generator().manual_seed(k), dtype=torch.float64))
+    g, S = neat.genomes, 24
+    sp = empty_species(2, cfg.num_nodes, S, device=g.device, dtype=g.weight.dtype)
+    reps = torch.arange(0, 6 * S, 6)  # every sixth genome represents a species; some slots dead
+    sp.alive[:] = torch.rand(2, S, generator=torch.Generator().manual_seed(9)) < 0.8
+    sp.rep_conn[:], sp.rep_weight[:], sp.rep_sigma[:] = g.conn[:, reps], g.weight[:, reps], g.sigma[:, reps]
+    out = [speciate(g, sp, cfg, RunRNG([4, 5]), 7, fused=fused) for fused in (False, True)]
+    (s0, sp0), (s1, sp1) = out
+    assert torch.equal(s0, s1)
+    for name, t in sp0.tensors().items():
+        assert torch.equal(t, getattr(sp1, name)), name
+    kinds = [len(torch.unique(row)) for row in s0]
+    assert all(1 < k < cfg.pop_size for k in kinds), kinds  # neither one species nor one each
+
+
 def _slot0_case():
     # Genome 0 joins the species in slot 0; genomes 1 to 5 match nothing and come later in
     # genome order.
