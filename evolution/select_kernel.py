@@ -40,18 +40,16 @@ _SOURCE = r"""
 #include <string.h>
 #include <math.h>
 """ + COUNTER_RNG_C + r"""
-/* idx[0..n) sorted by f descending, ties in index order (a stable merge sort). */
-static void sort_by_fitness(const double *f, int64_t n, int64_t *idx, int64_t *tmp) {
-    for (int64_t p = 0; p < n; ++p) idx[p] = p;
-    for (int64_t width = 1; width < n; width *= 2) {
-        for (int64_t lo = 0; lo < n; lo += 2 * width) {
-            const int64_t mid = lo + width < n ? lo + width : n, hi = lo + 2 * width < n ? lo + 2 * width : n;
-            int64_t i = lo, j = mid, k = lo;
-            while (i < mid && j < hi) tmp[k++] = f[idx[j]] > f[idx[i]] ? idx[j++] : idx[i++];
-            while (i < mid) tmp[k++] = idx[i++];
-            while (j < hi) tmp[k++] = idx[j++];
-        }
-        memcpy(idx, tmp, n * sizeof(int64_t));
+/* idx[0..n) sorted by f descending, ties in index order (a stable sort), by counting each
+   element's rank: n * n comparisons, but branch-free vector loops, faster than a merge sort's
+   unpredictable branches at a run's few hundred genomes. */
+static void sort_by_fitness(const double *f, int64_t n, int64_t *idx) {
+    for (int64_t p = 0; p < n; ++p) {
+        const double fp = f[p];
+        int64_t rank = 0;
+        _Pragma("omp simd reduction(+:rank)")
+        for (int64_t q = 0; q < n; ++q) rank += (f[q] > fp) | ((f[q] == fp) & (q < p));
+        idx[rank] = p;
     }
 }
 static inline int64_t pick_rank(double u, int64_t n) { /* (u * n).long().clamp_max(n - 1).clamp_min(0) */
@@ -71,11 +69,12 @@ void select_parents(const double *fitness, const int64_t *species, const uint8_t
         const int64_t *sp = species + r * P, *cnt = counts + r * S;
         const uint8_t *sv = survivors + r * S;
         const uint64_t key = (uint64_t)keys[r], b0 = (uint64_t)base[r];
-        int64_t *buf = malloc((5 * P + 4 * (S + 1)) * sizeof(int64_t));
-        int64_t *kspecies = buf, *by_fit = buf + P, *order = buf + 2 * P, *tmp = buf + 3 * P, *parents = buf + 4 * P;
-        int64_t *size = buf + 5 * P, *start = size + (S + 1), *npar = start + (S + 1), *fill = npar + (S + 1);
+        int64_t *buf = malloc((4 * P + 4 * (S + 1)) * sizeof(int64_t) + 5 * P * sizeof(double));
+        int64_t *kspecies = buf, *by_fit = buf + P, *order = buf + 2 * P, *parents = buf + 3 * P;
+        int64_t *size = buf + 4 * P, *start = size + (S + 1), *npar = start + (S + 1), *fill = npar + (S + 1);
+        double *u = (double *)(fill + (S + 1));
         for (int64_t p = 0; p < P; ++p) kspecies[p] = sv[sp[p]] ? sp[p] : S; /* dead species' members last */
-        sort_by_fitness(f, P, by_fit, tmp);
+        sort_by_fitness(f, P, by_fit);
         memset(size, 0, (S + 1) * sizeof(int64_t));
         for (int64_t p = 0; p < P; ++p) ++size[kspecies[p]];
         int64_t at = 0;
@@ -95,15 +94,16 @@ void select_parents(const double *fitness, const int64_t *species, const uint8_t
             if (q - start[s] < npar[s]) parents[n_parents++] = q;
         }
         const int64_t n_all = n_parents > 0 ? n_parents : 1;
+        /* the run's SELECTION_DRAWS blocks of P uniforms, in one vector loop */
+        _Pragma("omp simd")
+        for (int64_t c = 0; c < 5 * P; ++c) u[c] = uniform01(key, b0 + c);
         int64_t os = 0, end = S > 0 ? cnt[0] : 0;
         for (int64_t k = 0; k < P; ++k) {
             while (os < S - 1 && end <= k) end += cnt[++os]; /* searchsorted(ends, k, right), clamped */
             const int64_t pos = k - (end - cnt[os]), o_start = start[os], o_size = size[os], o_par = npar[os];
             const int64_t row = r * P + k;
             const int is_elite = pos < elitism && pos < o_size && o_size >= elitism_min;
-            const double u1 = uniform01(key, b0 + k), u2 = uniform01(key, b0 + P + k);
-            const double u3 = uniform01(key, b0 + 2 * P + k), u4 = uniform01(key, b0 + 3 * P + k);
-            const double u5 = uniform01(key, b0 + 4 * P + k);
+            const double u1 = u[k], u2 = u[P + k], u3 = u[2 * P + k], u4 = u[3 * P + k], u5 = u[4 * P + k];
             const int64_t p1 = is_elite ? order[o_start + pos] : order[o_start + pick_rank(u1, o_par)];
             int64_t p2 = order[o_start + pick_rank(u2, o_par)];
             int64_t pick = (int64_t)(u3 * (double)n_all);
