@@ -40,16 +40,32 @@ _SOURCE = r"""
 #include <string.h>
 #include <math.h>
 """ + COUNTER_RNG_C + r"""
-/* idx[0..n) sorted by f descending, ties in index order (a stable sort), by counting each
-   element's rank: n * n comparisons, but branch-free vector loops, faster than a merge sort's
-   unpredictable branches at a run's few hundred genomes. */
-static void sort_by_fitness(const double *f, int64_t n, int64_t *idx) {
-    for (int64_t p = 0; p < n; ++p) {
-        const double fp = f[p];
-        int64_t rank = 0;
-        _Pragma("omp simd reduction(+:rank)")
-        for (int64_t q = 0; q < n; ++q) rank += (f[q] > fp) | ((f[q] == fp) & (q < p));
-        idx[rank] = p;
+#define RANK_SORT_MAX 512
+/* idx[0..n) sorted by f descending, ties in index order (a stable sort). Up to RANK_SORT_MAX
+   by counting each element's rank: n * n comparisons, but branch-free vector loops, faster
+   than a merge sort's unpredictable branches at a run's few hundred genomes; beyond, a
+   merge sort (tmp: n more). */
+static void sort_by_fitness(const double *f, int64_t n, int64_t *idx, int64_t *tmp) {
+    if (n <= RANK_SORT_MAX) {
+        for (int64_t p = 0; p < n; ++p) {
+            const double fp = f[p];
+            int64_t rank = 0;
+            _Pragma("omp simd reduction(+:rank)")
+            for (int64_t q = 0; q < n; ++q) rank += (f[q] > fp) | ((f[q] == fp) & (q < p));
+            idx[rank] = p;
+        }
+        return;
+    }
+    for (int64_t p = 0; p < n; ++p) idx[p] = p;
+    for (int64_t width = 1; width < n; width *= 2) {
+        for (int64_t lo = 0; lo < n; lo += 2 * width) {
+            const int64_t mid = lo + width < n ? lo + width : n, hi = lo + 2 * width < n ? lo + 2 * width : n;
+            int64_t i = lo, j = mid, k = lo;
+            while (i < mid && j < hi) tmp[k++] = f[idx[j]] > f[idx[i]] ? idx[j++] : idx[i++];
+            while (i < mid) tmp[k++] = idx[i++];
+            while (j < hi) tmp[k++] = idx[j++];
+        }
+        memcpy(idx, tmp, n * sizeof(int64_t));
     }
 }
 static inline int64_t pick_rank(double u, int64_t n) { /* (u * n).long().clamp_max(n - 1).clamp_min(0) */
@@ -69,12 +85,12 @@ void select_parents(const double *fitness, const int64_t *species, const uint8_t
         const int64_t *sp = species + r * P, *cnt = counts + r * S;
         const uint8_t *sv = survivors + r * S;
         const uint64_t key = (uint64_t)keys[r], b0 = (uint64_t)base[r];
-        int64_t *buf = malloc((4 * P + 4 * (S + 1)) * sizeof(int64_t) + 5 * P * sizeof(double));
-        int64_t *kspecies = buf, *by_fit = buf + P, *order = buf + 2 * P, *parents = buf + 3 * P;
-        int64_t *size = buf + 4 * P, *start = size + (S + 1), *npar = start + (S + 1), *fill = npar + (S + 1);
+        int64_t *buf = malloc((5 * P + 4 * (S + 1)) * sizeof(int64_t) + 5 * P * sizeof(double));
+        int64_t *kspecies = buf, *by_fit = buf + P, *order = buf + 2 * P, *tmp = buf + 3 * P, *parents = buf + 4 * P;
+        int64_t *size = buf + 5 * P, *start = size + (S + 1), *npar = start + (S + 1), *fill = npar + (S + 1);
         double *u = (double *)(fill + (S + 1));
         for (int64_t p = 0; p < P; ++p) kspecies[p] = sv[sp[p]] ? sp[p] : S; /* dead species' members last */
-        sort_by_fitness(f, P, by_fit);
+        sort_by_fitness(f, P, by_fit, tmp);
         memset(size, 0, (S + 1) * sizeof(int64_t));
         for (int64_t p = 0; p < P; ++p) ++size[kspecies[p]];
         int64_t at = 0;

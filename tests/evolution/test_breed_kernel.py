@@ -100,6 +100,17 @@ def test_kernel_matches_reference_on_small_populations(seed, feed_forward, node_
 def test_selection_kernel_equals_the_tensor_selection(seed, pop, slots, survival, elitism, elitism_min, tied):
     # Small species, dead and stagnant slots, tied fitness values (ties go by index) and
     # survival thresholds whose float32 product with the size is rounded (0.3 * 10).
+    _check_selection(seed, pop, slots, survival, elitism, elitism_min, tied)
+
+
+@needs_kernel
+@pytest.mark.parametrize("pop", [512, 513, 1500])  # the kernel sorts up to 512 by rank, beyond by merging
+@pytest.mark.parametrize("tied", [False, True])
+def test_selection_kernel_equals_the_tensor_selection_in_large_runs(pop, tied):
+    _check_selection(pop, pop, 7, 0.2, 1, 3, tied)
+
+
+def _check_selection(seed, pop, slots, survival, elitism, elitism_min, tied):
     cfg = dataclasses.replace(small_config(pop_size=pop), survival_threshold=survival, elitism=elitism,
                               elitism_min_species_size=elitism_min, interspecies_crossover_prob=0.3)
     g = torch.Generator().manual_seed(seed)
