@@ -20,8 +20,8 @@ unused ones changes nothing, and the result is the same with any thread count.
   the bound. ``gene_distances`` gives the distances themselves.
   The reference sums the weight term another way (``L1 - a_only - b_only``), so the two
   agree to about 1e-15.
-- ``touched_nodes``: the node slots the living representatives use (the node registry's
-  reserved slots).
+- ``touched_nodes``: the node slots the living representatives use, from their bitsets
+  (the node registry's reserved slots).
 
 ``SNN_NEAT_FUSED=0`` disables the kernels (``snn_torch._cbuild``).
 """
@@ -29,6 +29,7 @@ unused ones changes nothing, and the result is the same with any thread count.
 from __future__ import annotations
 
 import ctypes
+import math
 import threading
 
 import torch
@@ -566,28 +567,32 @@ DEFINE_BREED(double, f64)
 void normals_check(uint64_t key, uint64_t c0, int64_t n, double *out) {
     for (int64_t k = 0; k < n; ++k) out[k] = normal_at(key, c0 + 2 * (uint64_t)k);
 }
-/* Gene bitsets, counts and highest occupied slot (-1: none) of rows conn[M, NN] (rows: of those rows). */
-void gene_bits(const uint8_t *conn, const int64_t *rows, int64_t M, int64_t NN, int64_t W, uint64_t *bits, int64_t *before,
-               int64_t *count, int64_t *top, int threads) {
+/* Gene bitsets, counts and highest occupied slot (-1: none) of rows conn[M, NN] (rows: of those rows).
+   alive (NULL: all): rows not alive are given no genes without reading them. */
+void gene_bits(const uint8_t *conn, const int64_t *rows, const uint8_t *alive, int64_t M, int64_t NN, int64_t W,
+               uint64_t *bits, int64_t *before, int64_t *count, int64_t *top, int threads) {
     _Pragma("omp parallel for schedule(static) num_threads(threads)")
     for (int64_t m = 0; m < M; ++m) {
-        pack_bits(conn + (rows ? rows[m] : m) * NN, NN, W, bits + m * W);
+        if (alive && !alive[m]) memset(bits + m * W, 0, W * sizeof(uint64_t));
+        else pack_bits(conn + (rows ? rows[m] : m) * NN, NN, W, bits + m * W);
         bits_summary(bits + m * W, W, before + m * W, count + m, top + m);
     }
 }
-/* Node slots touched by the genes of the living rows of conn[R * S, N, N]: out[R, N]. */
-void touched_nodes(const uint8_t *conn, const uint8_t *alive, int64_t R, int64_t S, int64_t N, uint8_t *out) {
+/* Node slots touched by the genes of the living rows of bits[R * S, W] (N nodes): out[R, N]. */
+void touched_nodes(const uint64_t *bits, const uint8_t *alive, int64_t R, int64_t S, int64_t W, int64_t N,
+                   uint8_t *out) {
     memset(out, 0, R * N);
-    for (int64_t q = 0; q < R * S; ++q) {
-        if (!alive[q]) continue;
-        const uint8_t *c = conn + q * N * N;
-        uint8_t *o = out + (q / S) * N, col[MAX_ROWS] = {0};
-        for (int64_t i = 0; i < N; ++i) { /* branch-free: a row's OR, and the columns' ORs */
-            uint8_t row = 0;
-            for (int64_t j = 0; j < N; ++j) { row |= c[i * N + j]; col[j] |= c[i * N + j]; }
-            o[i] |= row != 0;
-        }
-        for (int64_t j = 0; j < N; ++j) o[j] |= col[j] != 0;
+    for (int64_t r = 0; r < R; ++r) {
+        uint64_t any[MAX_SLOTS / 64] = {0}; /* the run's living genes, all representatives at once */
+        for (int64_t s = 0; s < S; ++s)
+            if (alive[r * S + s])
+                for (int64_t k = 0; k < W; ++k) any[k] |= bits[(r * S + s) * W + k];
+        uint8_t *o = out + r * N;
+        for (int64_t k = 0; k < W; ++k)
+            for (uint64_t x = any[k]; x; x &= x - 1) {
+                const int64_t slot = k * 64 + __builtin_ctzll(x);
+                o[slot / N] = 1; o[slot % N] = 1;
+            }
     }
 }
 """
@@ -616,9 +621,9 @@ def kernel_available() -> bool:
             _lib.normals_check.restype = None
             _lib.normals_check.argtypes = [ctypes.c_uint64, ctypes.c_uint64, L, P]
             _lib.gene_bits.restype = None
-            _lib.gene_bits.argtypes = [P, P, L, L, L, P, P, P, P, C]
+            _lib.gene_bits.argtypes = [P, P, P, L, L, L, P, P, P, P, C]
             _lib.touched_nodes.restype = None
-            _lib.touched_nodes.argtypes = [P, P, L, L, L, P]
+            _lib.touched_nodes.argtypes = [P, P, L, L, L, L, P]
             _lib._typed = True
     return _lib is not None
 
@@ -735,18 +740,24 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
 class GeneBits:
     """Gene bitsets of a set of genomes ``conn [..., N, N]`` (flattened to rows), with their
     weights and sigmas, for ``gene_distances``. ``runs``: of those runs of ``conn [R, P, N, N]``
-    only (the tensors are read in place, not copied)."""
+    only (the tensors are read in place, not copied). ``alive`` (one flag per row): rows not
+    alive (dead species' slots) get no genes, unread."""
 
-    def __init__(self, conn: Tensor, weight: Tensor, sigma: Tensor, runs: Tensor | None = None) -> None:
+    def __init__(self, conn: Tensor, weight: Tensor, sigma: Tensor, runs: Tensor | None = None,
+                 alive: Tensor | None = None) -> None:
         _require(conn, weight)
         self._bind(weight, sigma, runs)
         c = conn.reshape(-1, self.nn).contiguous()
         M = self.rows
+        live = None if alive is None else alive.reshape(-1).to(torch.uint8).contiguous()
+        if live is not None and live.numel() != M:
+            raise ValueError(f"alive has {live.numel()} flags for {M} rows")
         self.bits = torch.empty(M, self.words, dtype=torch.int64)
         self.before = torch.empty(M, self.words, dtype=torch.int64)  # genes in the words before
         self.count = torch.empty(M, dtype=torch.int64)
         self.top = torch.empty(M, dtype=torch.int64)
-        _lib.gene_bits(c.data_ptr(), None if self.map is None else self.map.data_ptr(), M, self.nn, self.words,
+        _lib.gene_bits(c.data_ptr(), None if self.map is None else self.map.data_ptr(),
+                       None if live is None else live.data_ptr(), M, self.nn, self.words,
                        self.bits.data_ptr(), self.before.data_ptr(), self.count.data_ptr(), self.top.data_ptr(),
                        torch.get_num_threads())
 
@@ -767,12 +778,16 @@ class GeneBits:
         self.nearest_to: tuple[GeneBits, Tensor, Tensor] | None = None
 
 
-def touched_nodes(conn: Tensor, alive: Tensor) -> Tensor:
-    """``[R, N]`` bool: node slots touched by a gene of a living row of ``conn[R, S, N, N]``."""
-    R, S, N = conn.shape[:3]
+def touched_nodes(genes: GeneBits, alive: Tensor) -> Tensor:
+    """``[R, N]`` bool: node slots touched by a gene of a living row, ``alive[R, S]``, of the
+    representatives' bitsets ``genes`` (``R x S`` rows)."""
+    R, S = alive.shape
+    N = math.isqrt(genes.nn)
+    if genes.rows != R * S:
+        raise ValueError(f"genes has {genes.rows} rows, alive flags {R} x {S}")
     out = torch.empty(R, N, dtype=torch.bool)
-    c, a = conn.contiguous(), alive.contiguous()
-    _lib.touched_nodes(c.data_ptr(), a.data_ptr(), R, S, N, out.data_ptr())
+    a = alive.to(torch.uint8).contiguous()
+    _lib.touched_nodes(genes.bits.data_ptr(), a.data_ptr(), R, S, genes.words, N, out.data_ptr())
     return out
 
 

@@ -125,12 +125,15 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
         counts = allocate_offspring(fitness, species, survivors, P)
         first, second, do_cross, elite = select_parents(fitness, species, survivors, counts, cfg, rng)
     active = ~elite
-    reserved = _rep_nodes(sp)
     child_genes = None
+    if use_kernels and breed_kernel.usable_for_species(sp.rep_conn, sp.rep_weight):
+        # The living representatives' genes: the node slots they hold, and each child's closest
+        # one, which breeding finds (speciate's first step).
+        rep_genes = breed_kernel.GeneBits(sp.rep_conn, sp.rep_weight, sp.rep_sigma, alive=sp.alive)
+        reps, reserved = (rep_genes, sp.rep_conn, sp.alive), breed_kernel.touched_nodes(rep_genes, sp.alive)
+    else:
+        reps, reserved = None, _rep_nodes(sp)
     if use_kernels:
-        # The representatives, so that breeding finds each child's closest one (speciate's first step).
-        reps = ((breed_kernel.GeneBits(sp.rep_conn, sp.rep_weight, sp.rep_sigma), sp.rep_conn, sp.alive)
-                if breed_kernel.usable_for_species(sp.rep_conn, sp.rep_weight) else None)
         children, refused, child_genes = breed_kernel.breed(g, first, second, do_cross, active, cfg, rng, reserved,
                                                             runs=runs, in_place=in_place, reps=reps)
     else:
@@ -213,9 +216,8 @@ def select_parents(fitness: Tensor, species: Tensor, survivors: Tensor, counts: 
 
 
 def _rep_nodes(sp: SpeciesState) -> Tensor:
-    """Node slots touched by any living representative's genes, ``[R, N]``."""
-    if breed_kernel.usable_for_species(sp.rep_conn, sp.rep_weight):
-        return breed_kernel.touched_nodes(sp.rep_conn, sp.alive)
+    """Node slots touched by any living representative's genes, ``[R, N]`` (the kernels'
+    ``breed_kernel.touched_nodes`` finds the same from the representatives' bitsets)."""
     R, S, N = sp.rep_conn.shape[:3]
     live = torch.nonzero(sp.alive.flatten()).squeeze(1)
     genes = sp.rep_conn.flatten(0, 1)[live]  # living representatives only

@@ -13,7 +13,7 @@ from scipy import stats
 from evolution import breed_kernel, select_kernel
 from evolution.distance import distance, gene_stats
 from evolution.neat import NEAT
-from evolution.reproduce import allocate_offspring, reproduce, select_parents, update_stagnation
+from evolution.reproduce import _rep_nodes, allocate_offspring, reproduce, select_parents, update_stagnation
 from evolution.rng import RunRNG, _cos_2pi, _log_unit, _sqrt, box_muller
 from evolution.speciate import SpeciesState, empty_species, speciate
 from snn_torch._cbuild import kernels_enabled
@@ -401,8 +401,28 @@ def test_touched_nodes_equal_the_tensor_reference(R, S, N):
     alive = torch.rand(R, S, generator=g) < 0.7
     alive[0, 0], conn[0, 0, 0, N - 1] = True, True  # at least one living gene
     expected = ((conn.any(-1) | conn.any(-2)) & alive[..., None]).any(1)
-    got = breed_kernel.touched_nodes(conn, alive)
-    assert torch.equal(got, expected)
+    weight, sigma = conn.float(), torch.ones(R, S)
+    for live in (None, alive):  # the dead rows' genes packed, or skipped
+        got = breed_kernel.touched_nodes(breed_kernel.GeneBits(conn, weight, sigma, alive=live), alive)
+        assert torch.equal(got, expected)
+    assert torch.equal(_rep_nodes(SpeciesState(**{**empty_species(R, N, S, device=torch.device("cpu"),
+                                                                   dtype=torch.float32).tensors(),
+                                                  "alive": alive, "rep_conn": conn})), expected)
+
+
+@needs_kernel
+def test_gene_bits_skip_dead_rows_and_keep_the_living():
+    g = torch.Generator().manual_seed(5)
+    conn = torch.rand(4, 6, 9, 9, generator=g) < 0.2
+    weight, sigma = torch.where(conn, torch.rand(4, 6, 9, 9, generator=g), 0.0), torch.rand(4, 6, generator=g)
+    alive = torch.rand(4, 6, generator=g) < 0.5
+    full, part = breed_kernel.GeneBits(conn, weight, sigma), breed_kernel.GeneBits(conn, weight, sigma, alive=alive)
+    live = alive.flatten()
+    for name in ("bits", "before", "count", "top"):
+        assert torch.equal(getattr(full, name)[live], getattr(part, name)[live]), name
+    assert (part.count[~live] == 0).all() and (part.top[~live] == -1).all() and (part.bits[~live] == 0).all()
+    with pytest.raises(ValueError, match="alive has 5 flags for 24 rows"):
+        breed_kernel.GeneBits(conn, weight, sigma, alive=torch.ones(5, dtype=torch.bool))
 
 
 @needs_kernel
