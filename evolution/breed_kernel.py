@@ -42,7 +42,7 @@ from evolution.rng import BOX_MULLER_C, COUNTER_RNG_C, RunRNG
 from snn_torch._cbuild import load_c_library
 
 __all__ = ["kernel_available", "usable_for", "wanted", "breed", "breed_blocks", "GeneBits", "gene_distances", "assign_species",
-           "touched_nodes"]
+           "touched_nodes", "put_rows"]
 
 # Draw blocks of one breeding step, in the reference's order (the C enum B_* lists them in the
 # same order): (name, "nn" for a [P, N, N] block or "p" for a [P] block, counters per draw).
@@ -578,6 +578,12 @@ void gene_bits(const uint8_t *conn, const int64_t *rows, const uint8_t *alive, i
         bits_summary(bits + m * W, W, before + m * W, count + m, top + m);
     }
 }
+/* dst rows idx[0..n) = src rows 0..n, whole rows of row_bytes; -1 if an index is outside [0, rows). */
+int put_rows(char *dst, const char *src, const int64_t *idx, int64_t n, int64_t rows, int64_t row_bytes) {
+    for (int64_t k = 0; k < n; ++k) if (idx[k] < 0 || idx[k] >= rows) return -1;
+    for (int64_t k = 0; k < n; ++k) memcpy(dst + idx[k] * row_bytes, src + k * row_bytes, row_bytes);
+    return 0;
+}
 /* Node slots touched by the genes of the living rows of bits[R * S, W] (N nodes): out[R, N]. */
 void touched_nodes(const uint64_t *bits, const uint8_t *alive, int64_t R, int64_t S, int64_t W, int64_t N,
                    uint8_t *out) {
@@ -622,6 +628,8 @@ def kernel_available() -> bool:
             _lib.normals_check.argtypes = [ctypes.c_uint64, ctypes.c_uint64, L, P]
             _lib.gene_bits.restype = None
             _lib.gene_bits.argtypes = [P, P, P, L, L, L, P, P, P, P, C]
+            _lib.put_rows.restype = ctypes.c_int
+            _lib.put_rows.argtypes = [P, P, P, L, L, L]
             _lib.touched_nodes.restype = None
             _lib.touched_nodes.argtypes = [P, P, L, L, L, L, P]
             _lib._typed = True
@@ -776,6 +784,24 @@ class GeneBits:
         # breed's closest representatives (``reps=``), and of which: (bits, rep_conn, alive)
         self.nearest: Tensor | None = None
         self.nearest_to: tuple[GeneBits, Tensor, Tensor] | None = None
+
+
+def put_rows(dst: Tensor, idx: Tensor, src: Tensor) -> None:
+    """``dst[idx] = src`` along the first dimension, whole rows by ``memcpy`` (CPU; ``dst``
+    contiguous). Indexed assignment copies element by element, 2x slower on a population's
+    representatives."""
+    if not kernel_available():
+        raise RuntimeError("the C breeding kernels are unavailable; use dst[idx] = src")
+    if dst.device.type != "cpu" or not dst.is_contiguous() or src.dtype != dst.dtype:
+        raise ValueError(f"put_rows takes a contiguous CPU dst and a src of its dtype, got {dst.dtype} on "
+                         f"{dst.device} and {src.dtype}")
+    rows = idx.to(torch.int64).cpu().contiguous()
+    if tuple(src.shape) != (rows.numel(), *dst.shape[1:]):
+        raise ValueError(f"src has shape {tuple(src.shape)}, expected {(rows.numel(), *dst.shape[1:])}")
+    s = src.contiguous()
+    row_bytes = dst[0].numel() * dst.element_size() if dst.shape[0] else 0
+    if _lib.put_rows(dst.data_ptr(), s.data_ptr(), rows.data_ptr(), rows.numel(), dst.shape[0], row_bytes):
+        raise IndexError(f"put_rows: an index is outside [0, {dst.shape[0]})")
 
 
 def touched_nodes(genes: GeneBits, alive: Tensor) -> Tensor:

@@ -21,6 +21,7 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
+from evolution import breed_kernel
 from evolution.checkpoint import (
     CHECKPOINT_FORMAT,
     CHECKPOINT_VERSION,
@@ -214,8 +215,12 @@ class NEAT:
                 full = full.grow(sp.capacity)
             elif sp.capacity < full.capacity:
                 sp = sp.grow(full.capacity)
+            rows = self.device.type == "cpu" and breed_kernel.kernel_available()
             for name, t in full.tensors().items():
-                t[idx] = getattr(sp, name)
+                if rows and t.is_contiguous():
+                    breed_kernel.put_rows(t, idx, getattr(sp, name))
+                else:
+                    t[idx] = getattr(sp, name)
             self.species_state = full
         return info
 

@@ -445,3 +445,22 @@ def test_kernels_give_the_same_generations_on_one_thread_and_on_two():
         torch.set_num_threads(before)
     _equal_state(*out)
     assert int(out[0].species_state.alive.sum(1).max()) >= 3  # the vector path of the assignment ran
+
+
+@needs_kernel
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64, torch.bool, torch.int64])
+def test_put_rows_equals_indexed_assignment_and_refuses_bad_input(dtype):
+    g = torch.Generator().manual_seed(3)
+    dst = (torch.rand(9, 4, 5, generator=g) * 7).to(dtype)
+    src = (torch.rand(3, 4, 5, generator=g) * 7).to(dtype)
+    idx = torch.tensor([8, 0, 4])
+    expected = dst.clone()
+    expected[idx] = src
+    breed_kernel.put_rows(dst, idx, src)
+    assert torch.equal(dst, expected)
+    with pytest.raises(IndexError, match=r"outside \[0, 9\)"):
+        breed_kernel.put_rows(dst, torch.tensor([9, 0, 1]), src)
+    with pytest.raises(ValueError, match="expected"):
+        breed_kernel.put_rows(dst, idx[:2], src)
+    with pytest.raises(ValueError, match="contiguous"):
+        breed_kernel.put_rows(dst.transpose(1, 2), idx, src.transpose(1, 2))
