@@ -42,7 +42,7 @@ from evolution.rng import BOX_MULLER_C, COUNTER_RNG_C, RunRNG
 from snn_torch._cbuild import load_c_library
 
 __all__ = ["kernel_available", "usable_for", "wanted", "breed", "breed_blocks", "GeneBits", "gene_distances", "assign_species",
-           "touched_nodes", "put_rows"]
+           "touched_nodes", "found_species", "put_rows"]
 
 # Draw blocks of one breeding step, in the reference's order (the C enum B_* lists them in the
 # same order): (name, "nn" for a [P, N, N] block or "p" for a [P] block, counters per draw).
@@ -578,6 +578,24 @@ void gene_bits(const uint8_t *conn, const int64_t *rows, const uint8_t *alive, i
         bits_summary(bits + m * W, W, before + m * W, count + m, top + m);
     }
 }
+/* speciate's bookkeeping for the species assign_species_ founded: run r's k-th new slot
+   founded[r * P + k] (k < n_founded[r]) lives, has no best fitness yet, was created and last
+   improved in this generation, and takes the run's next species number. State [R, S]. */
+int found_species(const int64_t *founded, const int64_t *n_founded, int64_t R, int64_t P, int64_t S,
+                  int64_t generation, uint8_t *alive, double *best, int64_t *last, int64_t *created,
+                  int64_t *ident, int64_t *next_id) {
+    for (int64_t r = 0; r < R; ++r) /* -1, nothing written: a slot beyond the state */
+        for (int64_t k = 0; k < n_founded[r]; ++k) if (founded[r * P + k] < 0 || founded[r * P + k] >= S) return -1;
+    for (int64_t r = 0; r < R; ++r) {
+        for (int64_t k = 0; k < n_founded[r]; ++k) {
+            const int64_t q = r * S + founded[r * P + k];
+            alive[q] = 1; best[q] = -INFINITY; last[q] = generation; created[q] = generation;
+            ident[q] = next_id[r] + k;
+        }
+        next_id[r] += n_founded[r];
+    }
+    return 0;
+}
 /* dst rows idx[0..n) = src rows 0..n, whole rows of row_bytes; -1 if an index is outside [0, rows). */
 int put_rows(char *dst, const char *src, const int64_t *idx, int64_t n, int64_t rows, int64_t row_bytes) {
     for (int64_t k = 0; k < n; ++k) if (idx[k] < 0 || idx[k] >= rows) return -1;
@@ -628,6 +646,8 @@ def kernel_available() -> bool:
             _lib.normals_check.argtypes = [ctypes.c_uint64, ctypes.c_uint64, L, P]
             _lib.gene_bits.restype = None
             _lib.gene_bits.argtypes = [P, P, P, L, L, L, P, P, P, P, C]
+            _lib.found_species.restype = ctypes.c_int
+            _lib.found_species.argtypes = [P, P, L, L, L, L] + [P] * 6
             _lib.put_rows.restype = ctypes.c_int
             _lib.put_rows.argtypes = [P, P, P, L, L, L]
             _lib.touched_nodes.restype = None
@@ -784,6 +804,24 @@ class GeneBits:
         # breed's closest representatives (``reps=``), and of which: (bits, rep_conn, alive)
         self.nearest: Tensor | None = None
         self.nearest_to: tuple[GeneBits, Tensor, Tensor] | None = None
+
+
+def found_species(founded: Tensor, n_founded: Tensor, generation: int, alive: Tensor, best_fitness: Tensor,
+                  last_improved: Tensor, created: Tensor, ident: Tensor, next_id: Tensor) -> None:
+    """Record, in place, the species ``assign_species`` founded (run ``r``'s in slots
+    ``founded[r, :n_founded[r]]``, all below ``S``): alive, no best fitness yet, created and
+    improved in ``generation``, numbered from the run's ``next_id`` on, which advances. The
+    species state tensors (``[R, S]``, ``next_id [R]``) must be contiguous CPU tensors of
+    their usual dtypes (bool, float64, int64)."""
+    R, S = alive.shape
+    state = (alive, best_fitness, last_improved, created, ident, next_id)
+    want = (torch.bool, torch.float64, torch.int64, torch.int64, torch.int64, torch.int64)
+    if any(t.dtype != d or not t.is_contiguous() or t.device.type != "cpu" for t, d in zip(state, want, strict=True)):
+        raise ValueError("found_species takes contiguous CPU species state tensors of their usual dtypes")
+    f, n = founded.to(torch.int64).contiguous(), n_founded.to(torch.int64).contiguous()
+    if _lib.found_species(f.data_ptr(), n.data_ptr(), R, f.shape[1], S, int(generation),
+                          *(t.data_ptr() for t in state)):
+        raise ValueError(f"a founded slot is beyond the {S} slots: grow the state first")
 
 
 def put_rows(dst: Tensor, idx: Tensor, src: Tensor) -> None:

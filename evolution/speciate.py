@@ -245,14 +245,9 @@ def _assign_by_kernel(g: Genomes, sp: SpeciesState, cfg: NEATConfig, generation:
         capacity *= 2
     if capacity > sp.capacity:
         sp = sp.grow(capacity)
-    run, k = torch.nonzero(torch.arange(g.pop_size) < n_founded.unsqueeze(1), as_tuple=True)
-    slot = founded[run, k]
-    sp.alive[run, slot] = True
-    sp.best_fitness[run, slot] = -torch.inf
-    sp.last_improved[run, slot] = generation
-    sp.created[run, slot] = generation
-    sp.ident[run, slot] = sp.next_id[run] + k
-    sp.next_id = sp.next_id + n_founded
+    # sp's tensors are speciate's own copies (or grown ones): recorded in place
+    breed_kernel.found_species(founded, n_founded, generation, sp.alive, sp.best_fitness, sp.last_improved,
+                               sp.created, sp.ident, sp.next_id)
     return species, sp
 
 

@@ -464,3 +464,30 @@ def test_put_rows_equals_indexed_assignment_and_refuses_bad_input(dtype):
         breed_kernel.put_rows(dst, idx[:2], src)
     with pytest.raises(ValueError, match="contiguous"):
         breed_kernel.put_rows(dst.transpose(1, 2), idx, src.transpose(1, 2))
+
+
+@needs_kernel
+def test_found_species_records_the_new_slots_as_the_tensor_bookkeeping():
+    R, S, P = 3, 10, 6
+    sp = empty_species(R, 4, S, device=torch.device("cpu"), dtype=torch.float32)
+    sp.next_id[:] = torch.tensor([5, 0, 12])
+    sp.best_fitness[:] = 1.5
+    founded = torch.tensor([[2, 3, 7, 0, 0, 0], [0, 0, 0, 0, 0, 0], [1, 9, 0, 0, 0, 0]])
+    n_founded = torch.tensor([3, 0, 2])
+    ref = SpeciesState(**{k: v.clone() for k, v in sp.tensors().items()})
+    run, k = torch.nonzero(torch.arange(P) < n_founded.unsqueeze(1), as_tuple=True)
+    slot = founded[run, k]
+    ref.alive[run, slot], ref.best_fitness[run, slot] = True, -torch.inf
+    ref.last_improved[run, slot], ref.created[run, slot] = 4, 4
+    ref.ident[run, slot] = ref.next_id[run] + k
+    ref.next_id += n_founded
+    breed_kernel.found_species(founded, n_founded, 4, sp.alive, sp.best_fitness, sp.last_improved, sp.created,
+                               sp.ident, sp.next_id)
+    for name, t in ref.tensors().items():
+        assert torch.equal(t, getattr(sp, name)), name
+    before = {k: v.clone() for k, v in sp.tensors().items()}
+    with pytest.raises(ValueError, match="beyond the 10 slots"):
+        breed_kernel.found_species(torch.tensor([[3, 10, 0, 0, 0, 0]] * 3), n_founded, 5, sp.alive,
+                                   sp.best_fitness, sp.last_improved, sp.created, sp.ident, sp.next_id)
+    for name, t in before.items():  # refused before anything was written
+        assert torch.equal(t, getattr(sp, name)), name
