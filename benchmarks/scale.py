@@ -2,7 +2,8 @@
 
     python benchmarks/scale.py                         # CPU: R x P up to 1e6, N in {8, 16, 32, 64}
     python benchmarks/scale.py --quick                 # a few small points
-    python benchmarks/scale.py --device cuda           # the torch path on a GPU
+    python benchmarks/scale.py --device cuda           # the torch path on a GPU, compiled
+    python benchmarks/scale.py --torch-path --compile on   # the CUDA code path, timed on the CPU
 
 Workload: the non-Markov cart-pole closed loop (plant, encoder, 20 Izhikevich substeps per
 control step, weighted-rate decoder) on random recurrent networks of N nodes (connection
@@ -10,8 +11,11 @@ probability 0.4), fixed episodes of ``--steps`` control steps (failure limits li
 row runs the whole episode). Batches larger than the memory budget (``--max-memory`` MiB for
 the weight tensor ``[B, N, N]``) are evaluated in chunks, one after another; a row's result
 does not depend on its chunk. CPU uses the closed-loop C kernel (one thread per row,
-``--threads``); CUDA uses the batched torch path. Prints genome-steps/s,
-neuron-substeps/s, chunks and peak memory (process RSS on CPU, max allocated on CUDA).
+``--threads``); CUDA uses the batched torch path (``--torch-path`` takes it on the CPU too),
+its substeps compiled by ``torch.compile`` (``--compile``: auto compiles on CUDA only; the
+compilation is paid once, before the timed rows, and printed separately). Prints
+genome-steps/s, neuron-substeps/s, chunks and peak memory (process RSS on CPU, max
+allocated on CUDA).
 """
 
 from __future__ import annotations
@@ -43,7 +47,8 @@ def random_chunk(rows: int, n: int, seed: int, device: str) -> tuple[Genomes, NE
     return genomes.to(device), cfg
 
 
-def run(total: int, n: int, steps: int, max_memory_mib: float, device: str) -> tuple[float, int]:
+def run(total: int, n: int, steps: int, max_memory_mib: float, device: str, *, torch_path: bool = False,
+        compile_step: bool | None = None) -> tuple[float, int]:
     """Seconds for ``total`` rows in chunks under the memory budget; returns (seconds, chunks)."""
     per_row = n * n * 4 * 4  # weight, conn, enabled, effective weight: ~4 [N, N] tensors per row
     chunk = max(1, min(total, int(max_memory_mib * 2**20 // per_row)))
@@ -57,7 +62,8 @@ def run(total: int, n: int, steps: int, max_memory_mib: float, device: str) -> t
         if device.startswith("cuda"):
             torch.cuda.synchronize()
         t0 = time.perf_counter()
-        policy = SpikingPolicy(genomes, cfg, SpikingSpec(), 0.01, NO_FAIL)
+        policy = SpikingPolicy(genomes, cfg, SpikingSpec(), 0.01, NO_FAIL, use_fused=not torch_path,
+                               compile_step=compile_step)
         done, _ = closed_loop(policy, state0, tau_s=0.01, max_steps=steps, plant=NO_FAIL)
         if device.startswith("cuda"):
             torch.cuda.synchronize()
@@ -74,22 +80,35 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=100, help="control steps per episode (default 100)")
     parser.add_argument("--max-memory", type=float, default=1024.0, help="MiB per chunk (default 1024)")
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--torch-path", action="store_true",
+                        help="the batched torch loop (what CUDA runs) instead of the CPU's C kernel")
+    parser.add_argument("--compile", choices=["auto", "on", "off"], default="auto",
+                        help="torch.compile the torch path's substep (auto: on CUDA only)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
+    torch_path = args.torch_path or not args.device.startswith("cpu")
+    compile_step = {"auto": None, "on": True, "off": False}[args.compile]
+    compiles = torch_path and (compile_step or (compile_step is None and args.device.startswith("cuda")))
+    if compiles:  # one graph serves every batch and network size: compile it before the timed rows
+        t0 = time.perf_counter()
+        run(2, 8, 1, args.max_memory, args.device, torch_path=True, compile_step=True)
+        print(f"torch.compile of the substep, paid once: {time.perf_counter() - t0:.1f} s")
     if args.quick:
         points = [(150, 8), (9000, 8), (9000, 32)]
     else:
         points = [(150, 8), (9000, 8), (100_000, 8), (1_000_000, 8), (9000, 16), (9000, 32), (9000, 64),
                   (100_000, 32), (100_000, 64)]
-    print(f"device {args.device}, {args.threads} thread(s), {args.steps} control steps x {SUBSTEPS} substeps, "
-          f"chunks of at most {args.max_memory:.0f} MiB")
+    path = ("torch path, compiled" if compiles else "torch path, eager") if torch_path else "C closed-loop kernel"
+    print(f"device {args.device} ({path}), {args.threads} thread(s), {args.steps} control steps x {SUBSTEPS} "
+          f"substeps, chunks of at most {args.max_memory:.0f} MiB")
     header = f"{'R x P':>10}{'N':>5}{'chunks':>8}{'genome-steps/s':>16}{'neuron-substeps/s':>19}{'peak MiB':>10}"
     print(header)
     print("-" * len(header))
     for total, n in points:
         if args.device.startswith("cuda"):
             torch.cuda.reset_peak_memory_stats()
-        seconds, chunks = run(total, n, args.steps, args.max_memory, args.device)
+        seconds, chunks = run(total, n, args.steps, args.max_memory, args.device, torch_path=torch_path,
+                              compile_step=compile_step)
         rate = total * args.steps / seconds
         if args.device.startswith("cuda"):
             peak = torch.cuda.max_memory_allocated() / 2**20

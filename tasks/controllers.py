@@ -33,6 +33,7 @@ from torch import Tensor
 from evolution.config import NEATConfig
 from evolution.phenotype import NEAT_SIGMOID_SLOPE
 from evolution.population import Genomes
+from snn_torch.compiled import CompiledSubstep
 from snn_torch.functional.fused_cpu import fused_recurrent_izhikevich_steps
 from snn_torch.functional.fused_cpu import supports as fused_supports
 from snn_torch.functional.izhikevich import (
@@ -129,7 +130,12 @@ class SpikingPolicy:
     """NEAT-SNN for the non-Markov task: one batched recurrent Izhikevich network."""
 
     def __init__(self, genomes: Genomes, config: NEATConfig, spec: SpikingSpec, tau_s: float,
-                 plant: CartPoleParams, *, use_fused: bool = True) -> None:
+                 plant: CartPoleParams, *, use_fused: bool = True, compile_step: bool | None = None) -> None:
+        """``compile_step``: run the torch path's substeps through ``torch.compile``
+        (``snn_torch.compiled.CompiledSubstep``; the same results, fused kernels); by default
+        on CUDA only. Where the C kernels run (CPU) they are used instead either way."""
+        if compile_step is not None and not isinstance(compile_step, bool):
+            raise ValueError(f"compile_step must be True, False or None, got {compile_step!r}")
         if config.num_inputs != 2 or config.num_outputs != 1:
             raise ValueError("the non-Markov spiking controller needs num_inputs=2 and num_outputs=1, got "
                              f"{config.num_inputs} and {config.num_outputs}")
@@ -156,6 +162,9 @@ class SpikingPolicy:
         self.tau_s = tau_s
         self.loop_fused = (self.fused and spec.rate_window_steps <= MAX_WINDOW and loop_available()
                            and plant_state_ok(w))
+        wants_compile = w.device.type == "cuda" if compile_step is None else compile_step
+        self.substep = (CompiledSubstep(spec.neuron, dt_ms=spec.dt_ms)
+                        if wants_compile and not self.fused else None)
 
     def run_fused(self, state0: Tensor, max_steps: int) -> Tensor | None:
         """Steps balanced per row from ``state0``, by the closed-loop C kernel; None if unavailable."""
@@ -180,6 +189,11 @@ class SpikingPolicy:
         if self.fused:
             counts, self.state = fused_recurrent_izhikevich_steps(i_ext, self.state, self.w, spec.neuron,
                                                                   dt_ms=spec.dt_ms, substeps=self.substeps)
+        elif self.substep is not None:
+            counts, state = torch.zeros_like(i_ext), self.state
+            for _ in range(self.substeps):
+                state, counts = self.substep(i_ext, state, self.w, counts)
+            self.state = state
         else:
             counts = torch.zeros_like(i_ext)
             state = self.state
