@@ -81,12 +81,24 @@ class CompiledSubstep:
         self._key = (tuple(float(x) for x in p), self.dt_ms, method)
         with _lock:
             if self._key not in _compiled:
-                _compiled[self._key] = _compile(_eager_step(IzhikevichParams(*self._key[0]), self.dt_ms, method))
+                try:  # torch.compile compiles lazily, but refuses some setups (a Python it does not support) at once
+                    _compiled[self._key] = _compile(_eager_step(IzhikevichParams(*self._key[0]), self.dt_ms, method))
+                except Exception as exc:  # noqa: BLE001 - any refusal: the eager step is the same function
+                    _compiled[self._key] = self._fail(exc)
+                    self._fn = self.eager
+                    return
             fn = _compiled[self._key]
         if isinstance(fn, str):  # failed before in this process, and said so then
             self.reason, self._fn = fn, self.eager
         else:
             self._fn = fn
+
+    def _fail(self, exc: Exception) -> str:
+        """Record and announce (once per process and key) why the eager step runs."""
+        first_line = (str(exc).splitlines() or [""])[0][:200]
+        self.reason = f"torch.compile failed ({type(exc).__name__}: {first_line})"
+        warnings.warn(f"snn-neat: {self.reason}; running the substep eagerly", RuntimeWarning, stacklevel=3)
+        return self.reason
 
     @property
     def compiled(self) -> bool:
@@ -100,11 +112,11 @@ class CompiledSubstep:
                 v, u, z, counts = self._fn(*args)
                 return RecurrentState(v, u, z), counts
             except Exception as exc:  # noqa: BLE001 - any compiler failure: the eager step is the same function
-                first_line = (str(exc).splitlines() or [""])[0][:200]
-                self.reason = f"torch.compile failed ({type(exc).__name__}: {first_line})"
-                warnings.warn(f"snn-neat: {self.reason}; running the substep eagerly", RuntimeWarning, stacklevel=2)
+                # Bad input fails eagerly too, and raises here without turning compilation off.
+                v, u, z, counts = self.eager(*args)
                 with _lock:
-                    _compiled[self._key] = self.reason
+                    _compiled[self._key] = self._fail(exc)
                 self._fn = self.eager
+                return RecurrentState(v, u, z), counts
         v, u, z, counts = self.eager(*args)
         return RecurrentState(v, u, z), counts

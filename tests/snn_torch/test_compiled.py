@@ -68,6 +68,34 @@ def test_a_failing_compiler_falls_back_to_the_eager_step_once(monkeypatch):
     compiled_mod._compiled.pop(again._key)
 
 
+def test_bad_input_raises_without_turning_compilation_off():
+    step = CompiledSubstep(QIU2019, dt_ms=0.5)
+    w, i_ext = _network(16, 8, 4)
+    with pytest.raises(RuntimeError):
+        _run(step, i_ext, w[:, :5, :5], 1, QIU2019)  # weights of 5 nodes for a state of 8
+    assert step.compiled and step.reason is None
+    state, counts = _run(step, i_ext, w, 5, QIU2019)
+    assert step.compiled
+    ref_state, ref_counts = _run(_eager(QIU2019), i_ext, w, 5, QIU2019)
+    assert torch.equal(counts, ref_counts) and torch.equal(state.v, ref_state.v)
+
+
+def test_a_compiler_refusing_at_once_falls_back_too(monkeypatch):
+    def refuses(fn):
+        raise RuntimeError("torch.compile is not supported on this Python")
+
+    monkeypatch.setattr(compiled_mod, "_compile", refuses)
+    p = IzhikevichParams(0.02, 0.2, -65.0, 8.0, 30.0 - 2e-3)  # a key no other test compiled
+    with pytest.warns(RuntimeWarning, match="not supported on this Python"):
+        step = CompiledSubstep(p, dt_ms=0.5)
+    assert not step.compiled
+    w, i_ext = _network(8, 5, 2)
+    state, counts = _run(step, i_ext, w, 10, p)
+    ref_state, ref_counts = _run(_eager(p), i_ext, w, 10, p)
+    assert torch.equal(counts, ref_counts) and torch.equal(state.v, ref_state.v)
+    compiled_mod._compiled.pop(step._key)
+
+
 def test_tensor_parameters_run_eagerly_and_say_why():
     p = IzhikevichParams(torch.full((6,), 0.02), 0.2, -65.0, 8.0)
     step = CompiledSubstep(p, dt_ms=0.5)
