@@ -80,6 +80,8 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=100, help="control steps per episode (default 100)")
     parser.add_argument("--max-memory", type=float, default=1024.0, help="MiB per chunk (default 1024)")
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--points", default=None,
+                        help="rows to time, as R x P 'x' N, comma separated (e.g. 1000000x8,9000x32)")
     parser.add_argument("--torch-path", action="store_true",
                         help="the batched torch loop (what CUDA runs) instead of the CPU's C kernel")
     parser.add_argument("--compile", choices=["auto", "on", "off"], default="auto",
@@ -93,7 +95,15 @@ def main() -> None:
         t0 = time.perf_counter()
         run(2, 8, 1, args.max_memory, args.device, torch_path=True, compile_step=True)
         print(f"torch.compile of the substep, paid once: {time.perf_counter() - t0:.1f} s")
-    if args.quick:
+    if args.points:
+        try:
+            points = [tuple(int(v) for v in item.lower().split("x")) for item in args.points.split(",")]
+        except ValueError:
+            parser.error(f"--points must look like 1000000x8,9000x32, got {args.points!r}")
+        if any(len(pt) != 2 or pt[0] < 1 or pt[1] < 3 for pt in points):
+            parser.error(f"--points must look like 1000000x8,9000x32 (at least 1 network of at least 3 nodes: "
+                         f"2 inputs and the output), got {args.points!r}")
+    elif args.quick:
         points = [(150, 8), (9000, 8), (9000, 32)]
     else:
         points = [(150, 8), (9000, 8), (100_000, 8), (1_000_000, 8), (9000, 16), (9000, 32), (9000, 64),
