@@ -34,7 +34,7 @@ from snn_torch.functional.izhikevich import (
 )
 from snn_torch.functional.recurrent import RecurrentState, recurrent_izhikevich_step
 
-__all__ = ["CompiledSubstep"]
+__all__ = ["CompiledSubstep", "eager_substep"]
 
 StepFn = Callable[[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor], tuple[Tensor, Tensor, Tensor, Tensor]]
 
@@ -43,12 +43,21 @@ _lock = threading.Lock()
 _compiled: dict[tuple, StepFn | str] = {}
 
 
+def eager_substep(i_ext: Tensor, state: RecurrentState, w_eff: Tensor, counts: Tensor, p: IzhikevichParams, *,
+                  dt_ms: float = DEFAULT_DT_MS, method: str = DEFAULT_METHOD) -> tuple[RecurrentState, Tensor]:
+    """The uncompiled reference: one substep (``dt_ms``, ms) of ``P`` recurrent networks, its
+    spikes added to ``counts``. Returns ``(state, counts + z)``; inputs are not checked (they
+    are inside a substep loop)."""
+    z, state = recurrent_izhikevich_step(i_ext, state, w_eff, p, dt_ms=dt_ms, method=method, validate=False)
+    return state, counts + z
+
+
 def _eager_step(p: IzhikevichParams, dt_ms: float, method: str) -> StepFn:
+    """``eager_substep`` on plain tensors, the form that is compiled."""
     def step(i_ext: Tensor, v: Tensor, u: Tensor, z: Tensor, w_eff: Tensor,
              counts: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-        z_new, state = recurrent_izhikevich_step(i_ext, RecurrentState(v, u, z), w_eff, p, dt_ms=dt_ms,
-                                                 method=method, validate=False)
-        return state.v, state.u, z_new, counts + z_new
+        state, counts = eager_substep(i_ext, RecurrentState(v, u, z), w_eff, counts, p, dt_ms=dt_ms, method=method)
+        return state.v, state.u, state.z, counts
 
     return step
 

@@ -33,7 +33,7 @@ from torch import Tensor
 from evolution.config import NEATConfig
 from evolution.phenotype import NEAT_SIGMOID_SLOPE
 from evolution.population import Genomes
-from snn_torch.compiled import CompiledSubstep
+from snn_torch.compiled import CompiledSubstep, eager_substep
 from snn_torch.functional.fused_cpu import fused_recurrent_izhikevich_steps
 from snn_torch.functional.fused_cpu import supports as fused_supports
 from snn_torch.functional.izhikevich import (
@@ -162,9 +162,10 @@ class SpikingPolicy:
         self.tau_s = tau_s
         self.loop_fused = (self.fused and spec.rate_window_steps <= MAX_WINDOW and loop_available()
                            and plant_state_ok(w))
+        # The torch path's substep (where the C kernels do not run): compiled, or the reference.
         wants_compile = w.device.type == "cuda" if compile_step is None else compile_step
-        self.substep = (CompiledSubstep(spec.neuron, dt_ms=spec.dt_ms)
-                        if wants_compile and not self.fused else None)
+        self.network_step = (CompiledSubstep(spec.neuron, dt_ms=spec.dt_ms) if wants_compile
+                             else functools.partial(eager_substep, p=spec.neuron, dt_ms=spec.dt_ms))
 
     def run_fused(self, state0: Tensor, max_steps: int) -> Tensor | None:
         """Steps balanced per row from ``state0``, by the closed-loop C kernel; None if unavailable."""
@@ -189,18 +190,10 @@ class SpikingPolicy:
         if self.fused:
             counts, self.state = fused_recurrent_izhikevich_steps(i_ext, self.state, self.w, spec.neuron,
                                                                   dt_ms=spec.dt_ms, substeps=self.substeps)
-        elif self.substep is not None:
+        else:
             counts, state = torch.zeros_like(i_ext), self.state
             for _ in range(self.substeps):
-                state, counts = self.substep(i_ext, state, self.w, counts)
-            self.state = state
-        else:
-            counts = torch.zeros_like(i_ext)
-            state = self.state
-            for _ in range(self.substeps):
-                z, state = recurrent_izhikevich_step(i_ext, state, self.w, spec.neuron, dt_ms=spec.dt_ms,
-                                                     validate=False)
-                counts = counts + z
+                state, counts = self.network_step(i_ext, state, self.w, counts)
             self.state = state
         self.history[self.step_index % spec.rate_window_steps] = counts
         self.step_index += 1

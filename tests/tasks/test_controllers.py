@@ -4,6 +4,7 @@ import pytest
 import torch
 
 from evolution import NEAT, NEATConfig
+from snn_torch.compiled import CompiledSubstep
 from tasks.cartpole import CartPoleParams, PlantError
 from tasks.controllers import SigmoidPolicy, SigmoidSpec, SpikingPolicy, SpikingSpec, closed_loop
 
@@ -56,14 +57,16 @@ def test_compiled_torch_path_balances_the_same_steps_as_the_eager_one():
     g = _population(SNN_CFG)
     compiled = SpikingPolicy(g, SNN_CFG, SpikingSpec(), 0.01, PLANT, use_fused=False, compile_step=True)
     eager = SpikingPolicy(g, SNN_CFG, SpikingSpec(), 0.01, PLANT, use_fused=False, compile_step=False)
-    assert compiled.substep is not None and eager.substep is None
+    assert isinstance(compiled.network_step, CompiledSubstep)
+    assert not isinstance(eager.network_step, CompiledSubstep)
     got, _ = closed_loop(compiled, _start(24), tau_s=0.01, max_steps=200, compact_below=0.99)
-    assert compiled.substep.compiled, compiled.substep.reason
+    assert compiled.network_step.compiled, compiled.network_step.reason
     want, _ = closed_loop(eager, _start(24), tau_s=0.01, max_steps=200, compact_below=0.99)
     assert len(set(want.tolist())) > 2  # rows fail at different steps: compaction changed the batch size
     assert torch.equal(got, want)
     # By default only CUDA compiles; the C kernels take the CPU batch.
-    assert SpikingPolicy(g, SNN_CFG, SpikingSpec(), 0.01, PLANT, use_fused=False).substep is None
+    assert not isinstance(SpikingPolicy(g, SNN_CFG, SpikingSpec(), 0.01, PLANT, use_fused=False).network_step,
+                          CompiledSubstep)
     with pytest.raises(ValueError, match="compile_step"):
         SpikingPolicy(g, SNN_CFG, SpikingSpec(), 0.01, PLANT, compile_step="yes")
 
