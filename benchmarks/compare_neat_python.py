@@ -28,9 +28,10 @@ import time
 import torch
 
 from evolution.config import NEATConfig
+from evolution.phenotype import make_controller
 from evolution.population import Genomes
-from tasks.cartpole import CartPoleParams
-from tasks.controllers import SigmoidPolicy, SigmoidSpec, SpikingPolicy, SpikingSpec, closed_loop
+from evolution.rollout import rollout
+from tasks.cartpole import CartPoleParams, CartPoleTask
 
 N_NODES, N_IN, OUT = 8, 2, 2  # node 2 is the output, 3..7 hidden
 SUBSTEPS = 20
@@ -49,20 +50,14 @@ def random_genomes(batch: int, seed: int = 0) -> tuple[Genomes, NEATConfig]:
     return Genomes(weight=w, conn=conn, enabled=conn.clone(), node=node, sigma=sigma), cfg
 
 
-def start(batch: int) -> torch.Tensor:
-    s = torch.zeros(batch, 4)
-    s[:, 2] = math.radians(3.0)
-    return s
+TASK = CartPoleTask.nonmarkov(plant=NO_FAIL)
 
 
-def ours(kind: str, genomes: Genomes, cfg: NEATConfig, steps: int, fused: bool, compiled: bool = False) -> float:
-    B = genomes.pop_size
-    if kind == "snn":
-        policy = SpikingPolicy(genomes, cfg, SpikingSpec(), TAU, NO_FAIL, use_fused=fused, compile_step=compiled)
-    else:
-        policy = SigmoidPolicy(genomes, cfg, SigmoidSpec(), NO_FAIL, tau_s=TAU, use_fused=fused)
+def ours(kind: str, genomes: Genomes, cfg: NEATConfig, steps: int, backend: str = "auto") -> float:
+    """Seconds for one episode of every genome through the task seam (``evolution.rollout``)."""
+    controller = make_controller(genomes, cfg, TASK, kind=kind, backend=backend)
     t0 = time.perf_counter()
-    done, _ = closed_loop(policy, start(B), tau_s=TAU, max_steps=steps, plant=NO_FAIL)
+    done = rollout(TASK, controller, max_steps=steps).steps
     elapsed = time.perf_counter() - t0
     assert int(done.min()) == steps, "an episode ended early"
     return elapsed
@@ -153,18 +148,20 @@ def main() -> None:
                 nss = f"{py_rate * N_NODES * SUBSTEPS:.3g}" if kind == "snn" else "-"
                 print(f"{kind:<10}{B:>8}{f'neat-python ({count} genomes)':>26}{py_rate:>16.3g}{nss:>19}{'1.0x':>16}")
             # The torch path is what CUDA runs; compiled (spiking only), it is CUDA's default.
-            paths = [("C kernel", True, False), ("torch eager", False, False)]
-            if kind == "snn":
-                paths.append(("torch compiled", False, True))
-            for name, fused, compiled in paths:
-                if not fused and not compiled and B > 150:
-                    continue  # the eager path at 9000 takes minutes; issue 8 tracks it
-                if compiled and not compiled_once:  # paid once per process, before the timed runs
+            # Sigmoid networks have one path (torch); spiking ones: the C kernel (the CPU's default),
+            # the eager torch step, and the compiled torch step (CUDA's default).
+            paths = [("seam, C kernel", "auto"), ("seam, torch eager", "torch"), ("seam, torch compiled", "compiled")]
+            if kind == "sigmoid":
+                paths = [("seam, torch", "auto")]
+            for name, backend in paths:
+                if backend == "torch" and B > 150:
+                    continue  # the eager path at 9000 takes minutes
+                if backend == "compiled" and not compiled_once:  # paid once per process, before the timed runs
                     compiled_once = True
                     t0 = time.perf_counter()
-                    ours(kind, genomes.gather(torch.zeros(1, 2, dtype=torch.long)), cfg, 1, False, True)
+                    ours(kind, genomes.gather(torch.zeros(1, 2, dtype=torch.long)), cfg, 1, "compiled")
                     print(f"{'':<18}(torch.compile of the substep: {time.perf_counter() - t0:.1f} s)")
-                t = statistics.median(ours(kind, genomes, cfg, steps, fused, compiled) for _ in range(args.repeats))
+                t = statistics.median(ours(kind, genomes, cfg, steps, backend) for _ in range(args.repeats))
                 rate = B * steps / t
                 nss = f"{rate * N_NODES * SUBSTEPS:.3g}" if kind == "snn" else "-"
                 ratio = f"{rate / py_rate:.0f}x" if py_rate else "-"

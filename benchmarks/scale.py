@@ -5,13 +5,13 @@
     python benchmarks/scale.py --device cuda           # the torch path on a GPU, compiled
     python benchmarks/scale.py --torch-path --compile on   # the CUDA code path, timed on the CPU
 
-Workload: the non-Markov cart-pole closed loop (plant, encoder, 20 Izhikevich substeps per
-control step, weighted-rate decoder) on random recurrent networks of N nodes (connection
+Workload: the non-Markov cart-pole through the task seam (``evolution.rollout``: plant,
+encoder, 20 Izhikevich substeps per control step, weighted-rate decoder) on random recurrent networks of N nodes (connection
 probability 0.4), fixed episodes of ``--steps`` control steps (failure limits lifted so every
 row runs the whole episode). Batches larger than the memory budget (``--max-memory`` MiB for
 the weight tensor ``[B, N, N]``) are evaluated in chunks, one after another; a row's result
-does not depend on its chunk. CPU uses the closed-loop C kernel (one thread per row,
-``--threads``); CUDA uses the batched torch path (``--torch-path`` takes it on the CPU too),
+does not depend on its chunk. CPU runs the network in its C kernel (``--threads``); CUDA
+uses the batched torch path (``--torch-path`` takes it on the CPU too),
 its substeps compiled by ``torch.compile`` (``--compile``: auto compiles on CUDA only; the
 compilation is paid once, before the timed rows, and printed separately). Prints
 genome-steps/s, neuron-substeps/s, chunks and peak memory (process RSS on CPU, max
@@ -28,11 +28,13 @@ import time
 import torch
 
 from evolution.config import NEATConfig
+from evolution.phenotype import make_controller
 from evolution.population import Genomes
-from tasks.cartpole import CartPoleParams
-from tasks.controllers import SpikingPolicy, SpikingSpec, closed_loop
+from evolution.rollout import rollout
+from tasks.cartpole import CartPoleParams, CartPoleTask
 
 NO_FAIL = CartPoleParams(x_limit=1e30, theta_limit=1e30)
+TASK = CartPoleTask.nonmarkov(plant=NO_FAIL)
 SUBSTEPS = 20
 
 
@@ -57,14 +59,13 @@ def run(total: int, n: int, steps: int, max_memory_mib: float, device: str, *, t
     for k in range(chunks):
         rows = min(chunk, total - k * chunk)
         genomes, cfg = random_chunk(rows, n, k, device)
-        state0 = torch.zeros(rows, 4, device=device)
-        state0[:, 2] = math.radians(3.0)
         if device.startswith("cuda"):
             torch.cuda.synchronize()
         t0 = time.perf_counter()
-        policy = SpikingPolicy(genomes, cfg, SpikingSpec(), 0.01, NO_FAIL, use_fused=not torch_path,
-                               compile_step=compile_step)
-        done, _ = closed_loop(policy, state0, tau_s=0.01, max_steps=steps, plant=NO_FAIL)
+        backend = "auto" if not torch_path else ("compiled" if compile_step or (compile_step is None and
+                                                                               device.startswith("cuda")) else "torch")
+        policy = make_controller(genomes, cfg, TASK, backend=backend)
+        done = rollout(TASK, policy, max_steps=steps).steps
         if device.startswith("cuda"):
             torch.cuda.synchronize()
         elapsed += time.perf_counter() - t0
@@ -108,7 +109,7 @@ def main() -> None:
     else:
         points = [(150, 8), (9000, 8), (100_000, 8), (1_000_000, 8), (9000, 16), (9000, 32), (9000, 64),
                   (100_000, 32), (100_000, 64)]
-    path = ("torch path, compiled" if compiles else "torch path, eager") if torch_path else "C closed-loop kernel"
+    path = ("torch path, compiled" if compiles else "torch path, eager") if torch_path else "seam, C network kernel"
     print(f"device {args.device} ({path}), {args.threads} thread(s), {args.steps} control steps x {SUBSTEPS} "
           f"substeps, chunks of at most {args.max_memory:.0f} MiB")
     header = f"{'R x P':>10}{'N':>5}{'chunks':>8}{'genome-steps/s':>16}{'neuron-substeps/s':>19}{'peak MiB':>10}"

@@ -1,20 +1,31 @@
-"""NEAT on population tensors (see DESIGN.md, "Population as tensors").
+"""NEAT on population tensors, and the task seam every controller runs on.
 
-    from evolution import NEAT, NEATConfig, StdOutReporter
+    from evolution import NEAT, NEATConfig, Task, TaskFitness
     neat = NEAT(NEATConfig(num_inputs=2, num_outputs=1), seeds=range(8))
-    result = neat.run(fitness_fn, generations=100, fitness_target=3.9)
+    result = neat.run(TaskFitness(my_task, neat.config, "snn"), generations=100)
 """
 
 from evolution.checkpoint import CheckpointError
 from evolution.config import ConfigError, NEATConfig
 from evolution.genome_io import load_genome, save_genome, to_networkx
 from evolution.neat import NEAT, FitnessError, NEATResult
-from evolution.phenotype import SigmoidNetworks, SpikingNetworks
+from evolution.phenotype import (
+    SigmoidController,
+    SigmoidSpec,
+    SpikingController,
+    SpikingSpec,
+    make_controller,
+    rest_rate_hz,
+)
 from evolution.population import Genomes, check_invariants
 from evolution.reporters import BaseReporter, Checkpointer, StatisticsReporter, StdOutReporter, TqdmReporter
+from evolution.rollout import RolloutResult, TaskFitness, episode_starts, evaluate, rollout
+from evolution.task import Task, TaskError
 
 __all__ = [
     "NEAT", "NEATConfig", "NEATResult", "Genomes", "ConfigError", "CheckpointError", "FitnessError",
     "BaseReporter", "Checkpointer", "StatisticsReporter", "StdOutReporter", "TqdmReporter",
-    "SigmoidNetworks", "SpikingNetworks", "check_invariants", "load_genome", "save_genome", "to_networkx",
+    "check_invariants", "load_genome", "save_genome", "to_networkx",
+    "Task", "TaskError", "TaskFitness", "RolloutResult", "rollout", "evaluate", "episode_starts",
+    "SpikingSpec", "SigmoidSpec", "SpikingController", "SigmoidController", "make_controller", "rest_rate_hz",
 ]

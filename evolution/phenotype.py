@@ -1,114 +1,367 @@
-"""Phenotypes: population tensors -> one batched recurrent network for all ``R x P`` genomes.
+"""Phenotypes: genomes -> controllers, each ``encoder -> population network -> decoder``.
 
-Semantics (DESIGN.md): recurrent, synchronous, one-step delay. At each update every
-non-input node receives ``sum_i w[i, j] y_prev[i]`` over its enabled incoming genes, one
-batched matmul for the whole population; no topological sort, any recurrence allowed.
+Every genome of an ``R x P`` population maps to one network of a single
+``snn_torch.PopulationRecurrentIzhikevich`` (``SpikingController``) or
+``snn_torch.PopulationRecurrentSigmoid`` (``SigmoidController``): the genome's enabled genes are
+the mask, its weights the weights, node slot ``i`` the neuron ``i``. Only node slots that some
+genome of the batch uses are simulated; every sum runs in slot order, so a genome's actions
+do not depend on the batch it is evaluated in, its position in it, or the slots it simulates.
 
-- ``SigmoidNetworks``: ``y_j = sigmoid(4.9 x_j)`` ([NEAT02]'s steepened sigmoid). Input
-  nodes hold the inputs, bias nodes hold 1. For a feed-forward genome, ``activate`` with as
-  many updates as its longest path gives exactly the feed-forward output.
-- ``SpikingNetworks``: every node is an Izhikevich neuron (``snn_torch``); input nodes are
-  driven by an input current, bias nodes by a constant current; state (v, u, spikes)
-  persists across control steps until ``reset``.
+Node roles (``NEATConfig`` layout): input slots are driven by the encoder; bias slots by a
+constant (a current of ``i_input_max`` for spiking networks, the value 1 for sigmoid ones);
+output slots are read by the decoder; hidden slots are neurons. All of a spiking controller's
+physics and coding choices live in one place, ``SpikingSpec``.
+
+Controllers are stateless modules: ``initial_state(network)`` gives the state of rows mapped to
+networks by ``network [B]`` (several episodes per genome), ``act(obs01, state)`` one control step
+from observations normalised to [0, 1], ``select(state, keep)`` the state of the rows kept when
+finished episodes are dropped. ``evolution.rollout`` drives them on any ``evolution.task.Task``.
 """
 
 from __future__ import annotations
 
+import functools
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
 import torch
-from torch import Tensor
+from torch import Tensor, nn
 
 from evolution.config import NEATConfig
 from evolution.population import Genomes
-from snn_torch.functional.izhikevich import DEFAULT_DT_MS, QIU2019, IzhikevichParams, check_dt
-from snn_torch.functional.recurrent import RecurrentState, recurrent_init, recurrent_izhikevich_step
+from snn_torch.functional.counter_rng import fnv1a_keys
+from snn_torch.functional.izhikevich import (
+    QIU2019,
+    IzhikevichParams,
+    IzhikevichState,
+    check_dt,
+    check_params,
+    izhikevich_init,
+    izhikevich_run,
+)
+from snn_torch.functional.recurrent import RecurrentState
+from snn_torch.modules.coding import (
+    BangBang,
+    BernoulliEncoder,
+    CurrentEncoder,
+    LinearReadout,
+    RateWindow,
+    RateWindowState,
+    SigmoidForce,
+)
+from snn_torch.modules.recurrent import PopulationRecurrentIzhikevich, PopulationRecurrentSigmoid
 
-__all__ = ["SigmoidNetworks", "SpikingNetworks", "NEAT_SIGMOID_SLOPE"]
+__all__ = ["SpikingSpec", "SigmoidSpec", "SpikingController", "SigmoidController", "SpikingState",
+           "SigmoidState", "rest_rate_hz", "used_slots", "NEAT_SIGMOID_SLOPE", "ENCODERS", "SPIKING_DECODERS",
+           "SIGMOID_DECODERS", "make_controller"]
 
 NEAT_SIGMOID_SLOPE = 4.9  # [NEAT02]
+ENCODERS = ("current", "bernoulli")
+SPIKING_DECODERS = ("sigmoid_force", "bang_bang", "linear")
+SIGMOID_DECODERS = ("sigmoid_force", "bang_bang")
 
 
-def _flat_weights(g: Genomes) -> Tensor:
-    w = g.effective_weight()
-    return w.reshape(-1, g.num_nodes, g.num_nodes)
+@dataclass(frozen=True)
+class SpikingSpec:
+    """A spiking controller's physics and coding, in one place. Defaults: the choices made for
+    Qiu et al.'s non-Markov cart-pole (the paper gives none of these values).
 
-
-class SigmoidNetworks:
-    """``R x P`` recurrent sigmoid networks, batched as ``B = R * P``."""
-
-    def __init__(self, genomes: Genomes, config: NEATConfig) -> None:
-        self.config = config
-        self.batch_shape = (genomes.num_runs, genomes.pop_size)
-        self.w = _flat_weights(genomes)
-        self.values: Tensor | None = None
-
-    def reset(self, *extra: int) -> None:
-        """Zero all node values; ``extra`` adds axes (e.g. several episodes per genome)."""
-        B, N = self.w.shape[0], self.w.shape[-1]
-        self.values = torch.zeros(B, *extra, N, dtype=self.w.dtype, device=self.w.device)
-
-    def step(self, inputs: Tensor) -> Tensor:
-        """One synchronous update. ``inputs[R, P, ..., num_inputs]``; returns all node values."""
-        cfg = self.config
-        if self.values is None:
-            self.reset(*inputs.shape[2:-1])
-        vals = self.values
-        x = vals.reshape(vals.shape[0], -1, vals.shape[-1]) @ self.w
-        y = torch.sigmoid(NEAT_SIGMOID_SLOPE * x).reshape(vals.shape)
-        y[..., : cfg.num_inputs] = inputs.reshape(-1, *inputs.shape[2:]).to(y.dtype)
-        y[..., cfg.num_inputs : cfg.first_output] = 1.0
-        self.values = y
-        return y.reshape(*self.batch_shape, *y.shape[1:])
-
-    def activate(self, inputs: Tensor, updates: int) -> Tensor:
-        """Reset, clamp the inputs, run ``updates`` updates; return the outputs ``[..., num_outputs]``."""
-        self.reset(*inputs.shape[2:-1])
-        self.step(inputs)  # place the inputs (and bias) first
-        for _ in range(updates):
-            y = self.step(inputs)
-        return y[..., self.config.first_output : self.config.first_hidden]
-
-
-class SpikingNetworks:
-    """``R x P`` recurrent Izhikevich networks, batched as ``B = R * P``.
-
-    Args:
-        genomes: the population.
-        config: its layout.
-        neuron: Izhikevich parameters for every node (default: Qiu et al.'s).
-        dt_ms: integration step (ms).
-        i_background: current added to every neuron (mV/ms; the paper's background current).
-        i_bias: current driving bias nodes (mV/ms).
+    Attributes:
+        neuron: Izhikevich parameters of every node ([Qiu19] Fig. 2's neuron).
+        dt_ms: substep (ms); snn_torch's validated default: rates within 3 Hz + 5 % of a fine
+            reference. A control step is ``task.control_period_s / dt`` substeps.
+        i_background: current into every neuron (mV/ms, the paper's nA). Alone a neuron then
+            fires at ~270 Hz, high on Fig. 2's f-I curve, so inhibitory input lowers its rate
+            instead of silencing it ([Qiu19]'s "frequency sufficiency"). The choice that mattered
+            most: tuning seeds 5000-5031 solved every run for 20 to 60 nA, 5/16 at 5 nA, none at 0.
+        synapse_kick_mv: mV jump of the postsynaptic membrane per presynaptic spike per unit
+            weight (a current of ``w * kick / dt_ms`` for one substep, so it does not depend on
+            dt; Izhikevich 2003's networks add ``w`` for one 1 ms step).
+        encoder: ``"current"``: input node ``k`` gets ``i_input_max * x_k`` (mV/ms) on top of the
+            background; ``"bernoulli"``: input nodes are spike sources firing with probability
+            ``x_k * input_rate_max_hz * dt`` per substep, keyed by a hash of the genome.
+        i_input_max: mV/ms at normalised input 1 (~270 -> ~700 Hz with the background); also
+            the current into bias nodes.
+        input_rate_max_hz: the Bernoulli encoder's rate at input 1 ([Qiu19]'s Markov task: the
+            normalised value is the spike probability per step: 1000 Hz at 0.5 ms is p = 0.5).
+        decoder: from the rates ``r_j`` of the nodes wired to output ``k`` with weights ``w_jk``,
+            the drive ``d_k = sum_j w_jk (r_j - rest_j)`` (Hz x weight; ``rest_j`` = 0 unless
+            ``rest_relative``). ``"sigmoid_force"``: ``a = a_max (2 sigmoid(sigma d) - 1)``
+            ([Qiu19] eq. 10); ``"bang_bang"``: ``a = +-a_max`` on ``d > threshold``;
+            ``"linear"``: ``a = clamp(sigma d, -1, 1) a_max``. ``sigma``: the genome's evolved gain.
+        rate_window_steps: control steps in the firing-rate window.
+        rest_relative: rates relative to each node's rate at rest (inputs: at the middle of
+            their range; neurons: under the background current alone, ``rest_rate_hz``).
+        threshold: the bang-bang decoder's threshold on the drive.
     """
 
-    def __init__(self, genomes: Genomes, config: NEATConfig, *, neuron: IzhikevichParams = QIU2019,
-                 dt_ms: float = DEFAULT_DT_MS, i_background: float = 0.0, i_bias: float = 20.0) -> None:
+    neuron: IzhikevichParams = QIU2019
+    dt_ms: float = 0.5
+    i_background: float = 30.0
+    synapse_kick_mv: float = 1.0
+    encoder: str = "current"
+    i_input_max: float = 60.0
+    input_rate_max_hz: float = 1000.0
+    decoder: str = "sigmoid_force"
+    rate_window_steps: int = 4
+    rest_relative: bool = False
+    threshold: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_dt(self.dt_ms)
+        check_params(self.neuron)
+        for name in ("i_background", "i_input_max", "input_rate_max_hz", "synapse_kick_mv", "threshold"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ValueError(f"SpikingSpec.{name} must be a finite number, got {value!r}")
+        if self.input_rate_max_hz < 0:
+            raise ValueError(f"SpikingSpec.input_rate_max_hz must be >= 0, got {self.input_rate_max_hz!r}")
+        if self.encoder not in ENCODERS:
+            raise ValueError(f"SpikingSpec.encoder must be one of {ENCODERS}, got {self.encoder!r}")
+        if self.decoder not in SPIKING_DECODERS:
+            raise ValueError(f"SpikingSpec.decoder must be one of {SPIKING_DECODERS}, got {self.decoder!r}")
+        if isinstance(self.rate_window_steps, bool) or not isinstance(self.rate_window_steps, int) \
+                or self.rate_window_steps < 1:
+            raise ValueError(f"SpikingSpec.rate_window_steps must be an int >= 1, got {self.rate_window_steps!r}")
+        if self.encoder == "bernoulli" and self.input_rate_max_hz * self.dt_ms / 1000.0 > 1.0 + 1e-12:
+            raise ValueError("SpikingSpec.input_rate_max_hz * dt_ms must be at most one spike per substep")
+
+    def substeps(self, period_s: float) -> int:
+        """Substeps of ``dt_ms`` in a control period of ``period_s`` seconds (a whole number)."""
+        substeps = int(round(period_s * 1000.0 / self.dt_ms))
+        if substeps < 1 or abs(substeps * self.dt_ms - period_s * 1000.0) > 1e-9:
+            raise ValueError(f"the control period ({period_s * 1000} ms) must be a whole number of dt_ms "
+                             f"({self.dt_ms} ms)")
+        return substeps
+
+
+@dataclass(frozen=True)
+class SigmoidSpec:
+    """A sigmoid controller's choices: ``updates_per_step`` network updates per control step
+    (NEAT pole balancing: 1) and the decoder of the outputs ``y`` in (0, 1):
+    ``"sigmoid_force"``: ``a = a_max (2 y - 1)``; ``"bang_bang"``: ``a = +-a_max`` on ``y > 0.5``."""
+
+    updates_per_step: int = 1
+    decoder: str = "sigmoid_force"
+    slope: float = NEAT_SIGMOID_SLOPE
+
+    def __post_init__(self) -> None:
+        if isinstance(self.updates_per_step, bool) or not isinstance(self.updates_per_step, int) \
+                or self.updates_per_step < 1:
+            raise ValueError(f"SigmoidSpec.updates_per_step must be an int >= 1, got {self.updates_per_step!r}")
+        if self.decoder not in SIGMOID_DECODERS:
+            raise ValueError(f"SigmoidSpec.decoder must be one of {SIGMOID_DECODERS}, got {self.decoder!r}")
+
+
+@functools.lru_cache(maxsize=32)
+def rest_rate_hz(neuron: IzhikevichParams, current: float, dt_ms: float) -> float:
+    """Steady firing rate (Hz) of one neuron under a constant ``current`` (mV/ms): spikes in 2 s
+    after 1 s of settling, integrated as the networks are (Heun, sub-step reset, float64)."""
+    steps = int(round(3000.0 / dt_ms))
+    v, u = izhikevich_init((1,), neuron, dtype=torch.float64)
+    z, _ = izhikevich_run(torch.full((steps, 1), float(current), dtype=torch.float64),
+                          IzhikevichState(v, u), neuron, dt_ms=dt_ms)
+    return float(z[steps // 3:].sum()) / 2.0
+
+
+def used_slots(genomes: Genomes) -> Tensor:
+    """Node slots some genome of the batch uses (inputs, bias and outputs always), ascending."""
+    N = genomes.num_nodes
+    return torch.nonzero(genomes.node.reshape(-1, N).any(0)).flatten()
+
+
+def _check_layout(config: NEATConfig, genomes: Genomes, observation_size: int, action_size: int) -> None:
+    if config.num_inputs != observation_size or config.num_outputs != action_size:
+        raise ValueError(f"the task has {observation_size} observations and {action_size} actions, but the config "
+                         f"has num_inputs={config.num_inputs} and num_outputs={config.num_outputs}")
+    if genomes.num_nodes != config.num_nodes:
+        raise ValueError(f"genomes have {genomes.num_nodes} node slots, the config {config.num_nodes}")
+
+
+class _Phenotype(nn.Module):
+    """What both controllers share: the used slots, the genomes' weights over them, the outputs."""
+
+    def __init__(self, genomes: Genomes, config: NEATConfig, observation_size: int, action_size: int) -> None:
+        super().__init__()
+        _check_layout(config, genomes, observation_size, action_size)
+        N = genomes.num_nodes
         self.config = config
-        self.neuron = neuron
-        self.dt_ms = check_dt(dt_ms)
-        self.batch_shape = (genomes.num_runs, genomes.pop_size)
-        self.w = _flat_weights(genomes)
-        self.i_background = float(i_background)
-        self.i_bias = float(i_bias)
-        self.state: RecurrentState | None = None
+        self.num_genomes = genomes.num_runs * genomes.pop_size
+        self.nodes = used_slots(genomes)
+        slots = self.nodes
+        self.weight = genomes.weight.reshape(-1, N, N)[:, slots][:, :, slots]
+        self.mask = genomes.enabled.reshape(-1, N, N)[:, slots][:, :, slots]
+        self.sigma = genomes.sigma.reshape(-1)
+        first_out = config.first_output
+        self.outputs = [int(torch.nonzero(slots == first_out + k).flatten()[0]) for k in range(action_size)]
+        self.n_in, self.n_bias = config.num_inputs, config.num_bias
 
-    def reset(self, *extra: int) -> None:
-        B, N = self.w.shape[0], self.w.shape[-1]
-        self.state = recurrent_init((B, *extra, N), self.neuron, device=self.w.device, dtype=self.w.dtype)
+    def _check_network(self, network: Tensor) -> Tensor:
+        if not isinstance(network, Tensor) or network.dim() != 1 or network.dtype != torch.int64:
+            raise ValueError("network must be a [B] int64 tensor of genome indices")
+        return network
 
-    def step(self, input_current: Tensor, substeps: int = 1) -> Tensor:
-        """Drive input nodes with ``input_current[R, P, ..., num_inputs]`` (mV/ms) for
-        ``substeps`` steps of ``dt_ms``; returns spike counts ``[R, P, ..., N]``."""
-        cfg = self.config
-        if self.state is None:
-            self.reset(*input_current.shape[2:-1])
-        v = self.state.v
-        i_ext = torch.full_like(v, self.i_background)
-        i_ext[..., : cfg.num_inputs] += input_current.reshape(-1, *input_current.shape[2:]).to(v.dtype)
-        i_ext[..., cfg.num_inputs : cfg.first_output] += self.i_bias
-        counts = torch.zeros_like(v)
-        state = self.state
-        for _ in range(substeps):
-            z, state = recurrent_izhikevich_step(i_ext, state, self.w, self.neuron, dt_ms=self.dt_ms, validate=False)
-            counts = counts + z
-        self.state = state
-        return counts.reshape(*self.batch_shape, *counts.shape[1:])
+
+class SpikingState(NamedTuple):
+    """Per-row state of a ``SpikingController`` (every tensor has the rows first, but ``window``'s
+    history, which has them second)."""
+
+    network: Tensor  # [B] int64: the genome of each row
+    neurons: RecurrentState  # [B, n]
+    window: RateWindowState  # history [W, B, n]
+    w_out: Tensor  # [B, n, K]: weights into the output nodes
+    sigma: Tensor  # [B]
+    keys: Tensor | None  # [B] int64: the Bernoulli encoder's stream of each row
+
+
+class SpikingController(_Phenotype):
+    """NEAT-SNN: ``encoder -> PopulationRecurrentIzhikevich -> rate window -> decoder`` for every genome.
+
+    Args:
+        genomes: the ``R x P`` population; network ``g`` is flattened genome ``g = r * P + p``.
+        config: its layout (inputs = observations, outputs = actions).
+        spec: physics and coding (``SpikingSpec``).
+        period_s: the control period (s); action_max: actions lie in ``[-action_max, action_max]``.
+        observation_size, action_size: the task's (checked against the config).
+        backend: the network's ``control_step`` backend (``"auto"``: C kernel on the CPU, compiled on CUDA).
+    """
+
+    def __init__(self, genomes: Genomes, config: NEATConfig, spec: SpikingSpec | None = None, *, period_s: float,
+                 action_max: float, observation_size: int, action_size: int = 1, backend: str = "auto") -> None:
+        super().__init__(genomes, config, observation_size, action_size)
+        self.spec = spec = SpikingSpec() if spec is None else spec
+        self.substeps = spec.substeps(period_s)
+        self.network = PopulationRecurrentIzhikevich(
+            self.weight, self.mask, spec.neuron, i_background=spec.i_background, synapse_kick_mv=spec.synapse_kick_mv,
+            dt_ms=spec.dt_ms, backend=backend)
+        n = len(self.nodes)
+        w_plain = torch.where(self.mask, self.weight, torch.zeros((), dtype=self.weight.dtype, device=self.weight.device))
+        self.w_out = w_plain[:, :, self.outputs]  # [G, n, K], the genomes' weights (not kick-scaled)
+        if spec.encoder == "current":
+            self.encoder: nn.Module = CurrentEncoder(spec.i_input_max)
+            self.keys = None
+        else:
+            self.encoder = BernoulliEncoder(spec.input_rate_max_hz, dt_ms=spec.dt_ms, substeps=self.substeps)
+            N = genomes.num_nodes
+            # The genome's full weights: the same key in any batch, whatever slots it simulates.
+            self.keys = fnv1a_keys(genomes.effective_weight().reshape(-1, N, N))
+        self.window = RateWindow(spec.rate_window_steps, period_s)
+        self.rest = None
+        if spec.rest_relative:
+            rest = torch.full((n,), rest_rate_hz(spec.neuron, spec.i_background, spec.dt_ms), dtype=torch.float64)
+            rest[: self.n_in] = (0.5 * spec.input_rate_max_hz if spec.encoder == "bernoulli"
+                                 else rest_rate_hz(spec.neuron, spec.i_background + 0.5 * spec.i_input_max, spec.dt_ms))
+            self.rest = rest.to(device=self.weight.device, dtype=self.weight.dtype).unsqueeze(-1)  # [n, 1]
+        if spec.decoder == "sigmoid_force":
+            self.decoder: nn.Module = SigmoidForce(action_max)
+        elif spec.decoder == "bang_bang":
+            self.decoder = BangBang(action_max, spec.threshold)
+        else:
+            self.decoder = LinearReadout(action_max, low=-action_max, high=action_max)
+        # input and bias currents of each control step: [n] buffer, bias slots at i_input_max
+        self._bias = torch.zeros(n, dtype=self.weight.dtype, device=self.weight.device)
+        self._bias[self.n_in : self.n_in + self.n_bias] = spec.i_input_max
+
+    def initial_state(self, network: Tensor) -> SpikingState:
+        network = self._check_network(network)
+        B, n = network.shape[0], len(self.nodes)
+        v = torch.empty(B, n, dtype=self.weight.dtype, device=self.weight.device)
+        neurons = self.network.initial_state(v)
+        keys = None if self.keys is None else self.keys.to(network.device)[network]
+        return SpikingState(network, neurons, self.window.initial_state(v), self.w_out[network], self.sigma[network],
+                            keys)
+
+    def select(self, state: SpikingState, keep: Tensor) -> SpikingState:
+        """The state of rows ``keep`` (int64 indices), in that order."""
+        neurons = RecurrentState(*(t[keep] for t in state.neurons))
+        window = RateWindowState(state.window.history[:, keep], state.window.steps)
+        return SpikingState(state.network[keep], neurons, window, state.w_out[keep], state.sigma[keep],
+                            None if state.keys is None else state.keys[keep])
+
+    def act(self, obs01: Tensor, state: SpikingState) -> tuple[Tensor, SpikingState, Tensor]:
+        """One control step from normalised observations ``[B, num_inputs]``: ``(action [B, K],
+        state, spike counts [B, n])``."""
+        B, n, n_in = obs01.shape[0], len(self.nodes), self.n_in
+        obs01 = obs01 if obs01.dtype == self.weight.dtype else obs01.to(self.weight.dtype)
+        source = None
+        if self.keys is None:
+            drive_in = self.encoder(obs01)
+            i_ext = torch.cat([drive_in, self._bias[n_in:].expand(B, n - n_in)], dim=1)
+        else:
+            source = self.encoder(obs01, state.keys, state.window.steps)
+            i_ext = self._bias.expand(B, n)
+        counts, neurons = self.network.control_step(i_ext, state.neurons, substeps=self.substeps,
+                                                    network=state.network, source_spikes=source, inplace=True)
+        rates, window = self.window(counts, state.window)
+        drive = _weighted_drive(rates, state.w_out, self.rest)
+        if self.spec.decoder == "sigmoid_force":
+            action = self.decoder(drive, state.sigma.unsqueeze(-1))
+        elif self.spec.decoder == "bang_bang":
+            action = self.decoder(drive)
+        else:
+            action = self.decoder(state.sigma.unsqueeze(-1) * drive)
+        return action, state._replace(neurons=neurons, window=window), counts
+
+
+def _weighted_drive(rates: Tensor, w_out: Tensor, rest: Tensor | None) -> Tensor:
+    """``d[b, k] = sum_j w_out[b, j, k] (r[b, j] - rest[j])`` in slot order (float64 accumulator)."""
+    r = rates.unsqueeze(-1)
+    terms = r * w_out if rest is None else (r - rest) * w_out
+    if terms.device.type == "cpu":
+        return torch.cumsum(terms, -2, dtype=torch.float64)[:, -1].to(rates.dtype)
+    acc = torch.zeros_like(terms[:, 0], dtype=torch.float64)
+    for j in range(terms.shape[1]):
+        acc = acc + terms[:, j].to(torch.float64)
+    return acc.to(rates.dtype)
+
+
+class SigmoidState(NamedTuple):
+    network: Tensor  # [B] int64
+    values: Tensor  # [B, n] node values
+
+
+class SigmoidController(_Phenotype):
+    """Sigmoid NEAT: ``PopulationRecurrentSigmoid`` (inputs clamped to the normalised observations,
+    bias nodes to 1, state carried across control steps) -> decoder, for every genome."""
+
+    def __init__(self, genomes: Genomes, config: NEATConfig, spec: SigmoidSpec | None = None, *, action_max: float,
+                 observation_size: int, action_size: int = 1, period_s: float | None = None) -> None:
+        super().__init__(genomes, config, observation_size, action_size)
+        self.spec = spec = SigmoidSpec() if spec is None else spec
+        self.network = PopulationRecurrentSigmoid(self.weight, self.mask, num_clamped=self.n_in, num_bias=self.n_bias,
+                                                  slope=spec.slope)
+        self.action_max = float(action_max)
+
+    def initial_state(self, network: Tensor) -> SigmoidState:
+        network = self._check_network(network)
+        return SigmoidState(network, self.network.initial_state(network.shape[0]))
+
+    def select(self, state: SigmoidState, keep: Tensor) -> SigmoidState:
+        return SigmoidState(state.network[keep], state.values[keep])
+
+    def act(self, obs01: Tensor, state: SigmoidState) -> tuple[Tensor, SigmoidState, Tensor]:
+        y = self.network.control_step(obs01.to(self.weight.dtype), state.values, updates=self.spec.updates_per_step,
+                                      network=state.network)
+        out = y[:, self.outputs]
+        if self.spec.decoder == "bang_bang":
+            action = torch.where(out > 0.5, self.action_max, -self.action_max).to(out.dtype)
+        else:
+            action = self.action_max * (2.0 * out - 1.0)
+        return action, SigmoidState(state.network, y), y
+
+
+def make_controller(genomes: Genomes, config: NEATConfig, task, spec: SpikingSpec | SigmoidSpec | None = None,
+                    *, kind: str = "snn", backend: str = "auto") -> SpikingController | SigmoidController:
+    """The controller of every genome for ``task`` (an ``evolution.task.Task``): ``kind`` ``"snn"``
+    (``SpikingController``) or ``"sigmoid"`` (``SigmoidController``)."""
+    common = dict(action_max=task.action_max, observation_size=task.observation_size, action_size=task.action_size)
+    if kind == "snn":
+        if spec is not None and not isinstance(spec, SpikingSpec):
+            raise ValueError(f"a spiking controller takes a SpikingSpec, got {type(spec).__name__}")
+        return SpikingController(genomes, config, spec, period_s=task.control_period_s, backend=backend, **common)
+    if kind == "sigmoid":
+        if spec is not None and not isinstance(spec, SigmoidSpec):
+            raise ValueError(f"a sigmoid controller takes a SigmoidSpec, got {type(spec).__name__}")
+        return SigmoidController(genomes, config, spec, **common)
+    raise ValueError(f"kind must be 'snn' or 'sigmoid', got {kind!r}")

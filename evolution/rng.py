@@ -16,8 +16,8 @@ draws it needs, the same numbers the tensor operators draw, without drawing the 
   float64 uniforms at counters ``2k`` and ``2k + 1`` of the block, rounded to the dtype.
   ``log`` and ``cos`` are our own (``box_muller``: exact range reduction, then series to
   about 1e-16) and ``sqrt`` too (Newton), built from IEEE-exact operations only
-  (``+ - * /``, exponent bits), so torch and the C kernels (``BOX_MULLER_C``) compute the same bits on any
-  machine, and the C loops vectorise.
+  (``+ - * /``, exponent bits), so torch and the C kernels (``evolution/csrc/box_muller.h``) compute the
+  same bits on any machine, and the C loops vectorise.
 
 Arithmetic is on int64 tensors, which wrap like uint64 for ``+``, ``*`` and ``^``; right
 shifts are made logical with a mask.
@@ -30,54 +30,15 @@ import math
 import torch
 from torch import Tensor
 
-__all__ = ["RunRNG", "mix64", "uniform01", "box_muller", "run_keys", "STREAM_GA", "COUNTER_RNG_C", "BOX_MULLER_C"]
+# The C kernels' copy of these primitives: evolution/csrc/counter_rng.h.
+from snn_torch.functional.counter_rng import bits, mix64, s64, srl, uniform01
 
-# The same primitives in C, for the kernels that draw from these streams.
-COUNTER_RNG_C = r"""
-static inline uint64_t mix64(uint64_t x) {
-    x += 0x9E3779B97F4A7C15ULL;
-    x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
-    x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
-    return x ^ (x >> 31);
-}
-static inline double uniform01(uint64_t key, uint64_t counter) {
-    return (double)(mix64(key ^ mix64(counter)) >> 11) * 0x1.0p-53;
-}
-"""
+__all__ = ["RunRNG", "mix64", "uniform01", "box_muller", "run_keys", "STREAM_GA"]
 
-
-def _s64(c: int) -> int:
-    """A uint64 constant as the int64 with the same bits."""
-    c &= (1 << 64) - 1
-    return c - (1 << 64) if c >= 1 << 63 else c
-
-
-_GOLDEN, _M1, _M2 = _s64(0x9E3779B97F4A7C15), _s64(0xBF58476D1CE4E5B9), _s64(0x94D049BB133111EB)
-_FNV_OFFSET, _FNV_PRIME = _s64(0xCBF29CE484222325), 0x100000001B3
+_s64 = s64
 STREAM_GA = _s64(0x6E656174_67610001)  # "neatga": keeps the GA stream apart from other seeded streams
 TWO_PI = 2.0 * math.pi
-
-
-def _srl(x: Tensor, k: int) -> Tensor:
-    """Logical right shift of int64 bits."""
-    return (x >> k) & ((1 << (64 - k)) - 1)
-
-
-def mix64(x: Tensor) -> Tensor:
-    """splitmix64's finaliser (int64 in, int64 out), as ``mix64`` in the C kernels."""
-    x = x + _GOLDEN
-    x = (x ^ _srl(x, 30)) * _M1
-    x = (x ^ _srl(x, 27)) * _M2
-    return x ^ _srl(x, 31)
-
-
-def _bits(key: Tensor, counter: Tensor) -> Tensor:
-    return mix64(key ^ mix64(counter))
-
-
-def uniform01(key: Tensor, counter: Tensor) -> Tensor:
-    """Uniform float64 in [0, 1) from 53 bits of ``mix64(key ^ mix64(counter))`` (broadcast)."""
-    return _srl(_bits(key, counter), 11).to(torch.float64) * 2.0**-53
+_srl, _bits = srl, bits
 
 
 def _uniform01_f32(key: Tensor, counter: Tensor) -> Tensor:
@@ -85,7 +46,8 @@ def _uniform01_f32(key: Tensor, counter: Tensor) -> Tensor:
 
 
 # Series coefficients: log1p(f) = 2s (1 + z/3 + z^2/5 + ...), s = f / (f + 2), z = s^2,
-# |s| <= 0.1716; cos and sin on [0, pi/4]. Terms to below 2^-53 of the sum.
+# |s| <= 0.1716; cos and sin on [0, pi/4]. Terms to below 2^-53 of the sum. The C kernels'
+# copies (csrc/box_muller.h, hex floats) are checked equal by tests/evolution/test_kernel_sources.py.
 _LOG_C = [1 / (2 * k + 1) for k in range(11)]
 _COS_C = [(-1) ** k / math.factorial(2 * k) for k in range(10)]
 _SIN_C = [(-1) ** k / math.factorial(2 * k + 1) for k in range(10)]
@@ -141,54 +103,6 @@ def _sqrt(v: Tensor) -> Tensor:
 def box_muller(u1: Tensor, u2: Tensor) -> Tensor:
     """Standard normals from float64 uniforms in [0, 1): ``sqrt(-2 log(1 - u1)) cos(2 pi u2)``."""
     return _sqrt(-2.0 * _log_unit(1.0 - u1)) * _cos_2pi(u2)
-
-
-def _c_horner(coef: list[float]) -> str:
-    expr = coef[-1].hex()
-    for c in reversed(coef[:-1]):
-        expr = f"({expr}) * z + {c.hex()}"
-    return expr
-
-
-# The same in C: branch-free, so loops over it vectorise. No contraction (the build's flags).
-BOX_MULLER_C = f"""
-static inline double bm_log_unit(double x) {{
-    uint64_t bits; memcpy(&bits, &x, 8);
-    double e = (double)((int64_t)((bits >> 52) & 0x7FF) - 1022), m;  /* frexp, x normal */
-    bits = (bits & 0x000FFFFFFFFFFFFFULL) | (1022ULL << 52); memcpy(&m, &bits, 8);
-    const int small = m < {_SQRT_HALF.hex()};
-    m = small ? m * 2.0 : m; e = small ? e - 1.0 : e;
-    const double f = m - 1.0, s = f / (f + 2.0), z = s * s;
-    return e * {_LN2.hex()} + (s + s) * ({_c_horner(_LOG_C)});
-}}
-static inline double bm_cos_2pi(double u) {{
-    double t = u > 0.5 ? 1.0 - u : u;
-    const int negate = t > 0.25;
-    t = negate ? 0.5 - t : t;
-    const int use_sin = t > 0.125;
-    t = use_sin ? 0.25 - t : t;
-    const double x = t * {TWO_PI.hex()}, z = x * x;
-    const double v = use_sin ? x * ({_c_horner(_SIN_C)}) : ({_c_horner(_COS_C)});
-    return negate ? -v : v;
-}}
-static inline double bm_sqrt(double v) {{
-    uint64_t bits; memcpy(&bits, &v, 8);
-    int64_t e = (int64_t)((bits >> 52) & 0x7FF) - 1022;
-    double m;
-    bits = (bits & 0x000FFFFFFFFFFFFFULL) | (1022ULL << 52); memcpy(&m, &bits, 8);
-    const int odd = (e & 1) != 0;
-    m = odd ? m * 2.0 : m;
-    const int64_t half_e = (odd ? e - 1 : e) / 2;
-    double y = 0.5 + 0.5 * m;
-    for (int k = 0; k < 5; ++k) y = 0.5 * (y + m / y);
-    const uint64_t sb = (uint64_t)(half_e + 1023) << 52;
-    double scale; memcpy(&scale, &sb, 8);
-    return v == 0.0 ? 0.0 : y * scale;
-}}
-static inline double box_muller(double u1, double u2) {{
-    return bm_sqrt(-2.0 * bm_log_unit(1.0 - u1)) * bm_cos_2pi(u2);
-}}
-"""
 
 
 def run_keys(seeds: list[int], device: torch.device | str = "cpu") -> Tensor:

@@ -1,4 +1,4 @@
-"""Weight search on a fixed topology with EvoTorch: the non-Markov cart-pole as an EvoTorch ``Problem``.
+"""Weight search on a fixed topology with EvoTorch: any task (``evolution.task.Task``) as an EvoTorch ``Problem``.
 
 NEAT finds a topology; any EvoTorch Gaussian searcher (SNES, XNES, CEM, PGPE, CMA-ES) can then
 tune its weights. ``FixedTopologyProblem`` fixes a connection mask ``[N, N]`` (a NEAT
@@ -18,12 +18,11 @@ and no sample is ever negative. Decoding then clamps weights to the config's
 so a searched vector is always a valid genome, and ``to_genomes`` returns exactly the genome
 that was evaluated.
 
-Fitness (maximised): control steps balanced on the paper's non-Markov cart-pole (Table II,
-tau = 0.01 s), up to ``max_steps``, averaged over ``starts``: by default the paper's single
-start (theta = 3 degrees); for robustness, any fixed ``[S, 4]`` set of start states, e.g.
-``tasks.generalization.start_grid()``'s 625. ``_evaluate_batch`` runs the whole EvoTorch
-population x all starts as one batched closed loop (``E * S`` rows), no Python loop over
-solutions.
+Fitness (maximised): the task's fitness (return or steps survived), up to ``max_steps``,
+averaged over ``starts``: by default the task's own start (``task.reset``); for robustness,
+any fixed set, e.g. the cart-pole's 625 of ``tasks.generalization.start_grid()``.
+``_evaluate_batch`` runs the whole EvoTorch population x all starts as one rollout
+(``evolution.rollout``), no Python loop over solutions.
 
 Usage, fine-tuning a NEAT-SNN champion for robustness::
 
@@ -32,6 +31,7 @@ Usage, fine-tuning a NEAT-SNN champion for robustness::
     from evotorch.logging import PandasLogger, StdOutLogger
     from evolution import load_genome, save_genome
     from evolution.weight_search import FixedTopologyProblem
+    from tasks.cartpole import CartPoleTask
     from tasks.experiments.cartpole import controller_config
     from tasks.generalization import start_grid, success_rate
 
@@ -40,7 +40,8 @@ Usage, fine-tuning a NEAT-SNN champion for robustness::
     grid = start_grid()                                      # 625 start states
     # train on a random quarter of the grid, report on all of it
     train = grid[torch.randperm(625, generator=torch.Generator().manual_seed(0))[:156]]
-    problem = FixedTopologyProblem.from_genome(champion, config, starts=train, max_steps=1000, seed=0)
+    problem = FixedTopologyProblem.from_genome(champion, config, task=CartPoleTask.nonmarkov(), starts=train,
+                                                max_steps=1000, seed=0)
     searcher = SNES(problem, popsize=32, stdev_init=0.3, center_init=problem.initial_solution())
     StdOutLogger(searcher, interval=10)
     log = PandasLogger(searcher)
@@ -66,11 +67,10 @@ from evotorch import Problem, SolutionBatch
 from torch import Tensor
 
 from evolution.config import NEATConfig
+from evolution.phenotype import SigmoidSpec, SpikingSpec, make_controller
 from evolution.population import Genomes
-from tasks.cartpole import DEFAULT_PLANT, CartPoleParams
-from tasks.controllers import SigmoidSpec, SpikingSpec
-from tasks.experiments.cartpole import NONMARKOV, nonmarkov_start
-from tasks.generalization import check_starts, make_policy, steps_from_starts
+from evolution.rollout import episode_starts, rollout
+from evolution.task import Task
 
 __all__ = ["FixedTopologyProblem"]
 
@@ -103,29 +103,35 @@ class FixedTopologyProblem(Problem):
             reach every output and lead into no input or bias node.
         controller: ``"snn"`` (Qiu et al.'s spiking controller, searches ln sigma too) or
             ``"sigmoid"`` (the sigmoid NEAT baseline, weights only).
-        starts: ``[S, 4]`` start states, fitness is the mean over them. Default: the
-            paper's single start, theta = 3 degrees.
-        max_steps: episode length cap (the paper: 5000).
+        task: the ``evolution.task.Task`` to search on (e.g. ``tasks.cartpole.CartPoleTask.nonmarkov()``).
+        starts: ``[S, ...]`` start states (as ``task.reset`` returns them); fitness is the mean
+            over them (of the return or the steps survived, ``task.fitness``). Default:
+            ``episodes`` starts from ``task.reset`` with a generator seeded by ``start_seed``.
+        max_steps: episode length cap (default ``task.max_steps``).
         template: a ``[1, 1]`` Genomes whose other genes (disabled ones, nodes) and sigma
             the decoded genomes keep; ``from_genome`` sets it. Default: the mask's genes
             only, weights 0, sigma ``config.sigma_init_mean``.
         init_radius: ``initial_bounds`` are ``initial_solution() +- init_radius`` (used by
             searchers given no ``center_init``, and by ``problem.generate_batch``).
-        spiking, sigmoid, plant: controller specs and plant (defaults: the package's).
+        spec: the controller's ``SpikingSpec`` or ``SigmoidSpec`` (default: the class defaults).
         dtype, device: of the solutions and of the evaluation.
         **problem_kwargs: passed to ``evotorch.Problem`` (``seed``, ``num_actors``,
             ``num_subbatches``, ``subbatch_size``, ...).
     """
 
-    def __init__(self, config: NEATConfig, mask: Any, *, controller: str = "snn", starts: Tensor | None = None,
-                 max_steps: int = NONMARKOV["max_steps"], template: Genomes | None = None, init_radius: float = 1.0,
-                 spiking: SpikingSpec | None = None, sigmoid: SigmoidSpec | None = None,
-                 plant: CartPoleParams = DEFAULT_PLANT, dtype: torch.dtype = torch.float32,
+    def __init__(self, config: NEATConfig, mask: Any, *, task: Task, controller: str = "snn",
+                 starts: Tensor | None = None, episodes: int = 1, start_seed: int = 0, max_steps: int | None = None,
+                 template: Genomes | None = None, init_radius: float = 1.0,
+                 spec: SpikingSpec | SigmoidSpec | None = None, dtype: torch.dtype = torch.float32,
                  device: str | torch.device = "cpu", **problem_kwargs) -> None:
         if not isinstance(config, NEATConfig):
             raise ValueError(f"config must be a NEATConfig, got {type(config).__name__}")
         if controller not in CONTROLLERS:
             raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
+        if not isinstance(task, Task):
+            raise ValueError(f"task must be an evolution.task.Task, got {type(task).__name__}")
+        task.validate()
+        max_steps = task.max_steps if max_steps is None else max_steps
         if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
             raise ValueError(f"max_steps must be an integer >= 1, got {max_steps!r}")
         if not (isinstance(init_radius, (int, float)) and init_radius > 0):
@@ -138,12 +144,17 @@ class FixedTopologyProblem(Problem):
             if not bool(mask[:, out].any()):
                 raise ValueError(f"mask has no connection into output node {out}: the controller's output "
                                  "would not depend on its weights")
-        self.config, self.controller, self.plant = config, controller, plant
-        self.spiking, self.sigmoid = spiking, sigmoid
+        self.config, self.controller, self.task, self.spec = config, controller, task, spec
         self.max_steps = max_steps
         device = torch.device(device)
-        start = nonmarkov_start(1, dtype=dtype) if starts is None else starts
-        self.starts = check_starts(start, plant, name="starts").to(device=device, dtype=dtype)
+        if starts is None:
+            starts = episode_starts(task, episodes, start_seed, device=device, dtype=dtype)
+        if not isinstance(starts, Tensor) or starts.dim() < 1 or starts.shape[0] < 1:
+            raise ValueError(f"starts must be a [S, ...] tensor of S >= 1 start states, got "
+                             f"{tuple(starts.shape) if isinstance(starts, Tensor) else type(starts).__name__}")
+        if starts.is_floating_point() and not bool(torch.isfinite(starts).all()):
+            raise ValueError("starts holds NaN or inf")
+        self.starts = starts.to(device=device, dtype=dtype if starts.is_floating_point() else starts.dtype)
         self.connections = torch.nonzero(mask).to(device)  # [C, 2], row-major (from, to)
         self._mask = mask.to(device)
         self._template = self._make_template(template, config, mask, dtype, device)
@@ -229,6 +240,8 @@ class FixedTopologyProblem(Problem):
     def decode(self, values: Any, repeats: int = 1) -> Genomes:
         """``[E, D]`` solution values -> a ``[E, repeats]`` population (each solution
         ``repeats`` times, as expanded views), weights and sigma clamped to the config's bounds."""
+        if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < 1:
+            raise ValueError(f"repeats must be a positive int, got {repeats!r}")
         values = self._check_values(values, "solution")
         cfg, t = self.config, self._template
         E, N = values.shape[0], cfg.num_nodes
@@ -251,15 +264,13 @@ class FixedTopologyProblem(Problem):
 
     # --- evaluation ----------------------------------------------------------------------
     def fitness(self, values: Any) -> Tensor:
-        """Mean steps balanced over ``starts``, ``[E]`` float64, for ``[E, D]`` solution values:
-        one closed loop of ``E * S`` rows."""
-        genomes = self.decode(values, self.starts.shape[0])
-        E = genomes.num_runs
-        policy = make_policy(genomes, self.config, self.controller, spiking=self.spiking, sigmoid=self.sigmoid,
-                             plant=self.plant, tau_s=NONMARKOV["tau_s"])
-        steps = steps_from_starts(policy, self.starts, E, max_steps=self.max_steps, tau_s=NONMARKOV["tau_s"],
-                                  plant=self.plant)
-        return steps.to(torch.float64).mean(-1)
+        """Mean fitness over ``starts`` (the task's return or steps survived), ``[E]`` float64,
+        for ``[E, D]`` solution values: one rollout of ``E`` controllers x ``S`` episodes."""
+        genomes = self.decode(values, 1)
+        controller = make_controller(genomes, self.config, self.task, self.spec, kind=self.controller)
+        result = rollout(self.task, controller, episodes=self.starts.shape[0], starts=self.starts,
+                         max_steps=self.max_steps)
+        return result.fitness(self.task.fitness).mean(-1)
 
     def seed(self, seed: int | None = None) -> None:
         """Alias of ``manual_seed``: EvoTorch 0.6.1's Ray actors call ``problem.seed(...)`` when the

@@ -1,9 +1,18 @@
-"""Build small C kernels once with the system compiler and load them with ``ctypes``.
+"""Build the package's C kernels once per machine with the system compiler; load them with ``ctypes``.
 
-Libraries are cached under ``$SNN_NEAT_CACHE`` (default ``~/.cache/snn_neat``), keyed by
-source, flags, compiler and CPU, and written atomically (build in a temp folder, rename),
-so concurrent processes never load half a library. ``SNN_NEAT_FUSED=0`` disables every
-kernel; callers then use their torch reference path.
+Kernels are ``.c``/``.h`` files shipped as package data (``snn_torch/csrc``, ``evolution/csrc``).
+Each library's exported functions are declared once, in its header: ``load_library`` reads the
+prototypes there and sets every function's ``ctypes`` signature from them, and the ``.c`` file
+includes the header, so the compiler checks that the definitions match. A header function
+missing from the built library is an error at load. Headers a file includes by
+``#include "name.h"`` are read from its folder and are part of the build (and its cache key).
+``load_libraries`` builds several libraries side by side, one compiler process each.
+
+Libraries are cached under ``$SNN_NEAT_CACHE`` (default ``~/.cache/snn_neat``), keyed by the
+sources, flags, compiler and CPU, and written atomically (build in a temp folder, rename), so
+concurrent processes never load half a library. A build prints one line to stderr. With no
+compiler, a failed build, an unwritable cache or ``SNN_NEAT_FUSED=0``, ``load_library`` returns
+None and callers use their torch path, which gives the same results (tested), only slower.
 """
 
 from __future__ import annotations
@@ -11,22 +20,85 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
+import re
 import shutil
 import subprocess
 import sys
 import tempfile
+import threading
+import time
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 
-__all__ = ["load_c_library", "kernels_enabled"]
+__all__ = ["load_library", "load_libraries", "kernels_enabled", "parse_prototypes",
+           "KernelLibrary"]
 
 # No contraction, no fast-math: the kernels must repeat torch's IEEE operations exactly.
 FLAGS = ["-O3", "-march=native", "-ffp-contract=off", "-fno-fast-math", "-fopenmp", "-shared", "-fPIC", "-std=c11"]
-_cache: dict[str, ctypes.CDLL | None] = {}
+_cache: dict[str, object] = {}
+_lock = threading.Lock()  # one build per library and process, whichever thread asks first
+
+_CTYPES = {
+    "void": None, "int": ctypes.c_int, "int64_t": ctypes.c_int64, "uint64_t": ctypes.c_uint64,
+    "int32_t": ctypes.c_int32, "uint32_t": ctypes.c_uint32, "uint8_t": ctypes.c_uint8,
+    "float": ctypes.c_float, "double": ctypes.c_double,
+}
+_PROTOTYPE = re.compile(r"^\s*(\w+)\s+(\w+)\s*\(([^)]*)\)\s*;", re.MULTILINE)
+_LOCAL_INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.MULTILINE)
 
 
 def kernels_enabled() -> bool:
+    """False when ``SNN_NEAT_FUSED=0``: every kernel off, the torch paths run."""
     return os.environ.get("SNN_NEAT_FUSED", "1") != "0"
+
+
+def parse_prototypes(header: str) -> dict[str, tuple[object, list[object]]]:
+    """``{name: (restype, argtypes)}`` for every function prototype in ``header``'s text.
+
+    Pointers of any type map to ``c_void_p``; scalars to their ctypes type. An unknown type
+    raises ``ValueError`` naming the function and the parameter.
+    """
+    text = re.sub(r"/\*.*?\*/", "", header, flags=re.DOTALL)
+    out: dict[str, tuple[object, list[object]]] = {}
+    for ret, name, params in _PROTOTYPE.findall(text):
+        if ret not in _CTYPES:
+            raise ValueError(f"prototype {name}: unknown return type {ret!r}")
+        argtypes: list[object] = []
+        for param in (p.strip() for p in params.split(",")):
+            if not param or param == "void":
+                continue
+            if "*" in param:
+                argtypes.append(ctypes.c_void_p)
+                continue
+            words = [w for w in param.split() if w != "const"]
+            if len(words) != 2 or words[0] not in _CTYPES or words[0] == "void":
+                raise ValueError(f"prototype {name}: cannot map parameter {param!r} to a ctypes type")
+            argtypes.append(_CTYPES[words[0]])
+        out[name] = (_CTYPES[ret], argtypes)
+    return out
+
+
+class KernelLibrary:
+    """A loaded kernel library whose functions carry the signatures of its header."""
+
+    def __init__(self, dll: ctypes.CDLL, prototypes: dict[str, tuple[object, list[object]]], path: Path) -> None:
+        self.path = path
+        self.functions = {}
+        for name, (restype, argtypes) in prototypes.items():
+            try:
+                fn = getattr(dll, name)
+            except AttributeError:
+                raise ImportError(f"C kernel library {path.name}: {name} is declared in the header but not "
+                                  "defined in the library") from None
+            fn.restype, fn.argtypes = restype, argtypes
+            self.functions[name] = fn
+
+    def __getattr__(self, name: str):
+        try:
+            return self.__dict__["functions"][name]
+        except KeyError:
+            raise AttributeError(f"{name} is not declared in this library's header") from None
 
 
 def _cpu_signature() -> str:
@@ -38,36 +110,133 @@ def _cpu_signature() -> str:
         return ""
 
 
-def _build(name: str, source: str) -> ctypes.CDLL | None:
-    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
-    if cc is None:
-        return None
-    key = hashlib.sha256((source + " ".join(FLAGS) + cc + sys.platform + _cpu_signature()).encode()).hexdigest()[:16]
-    root = Path(os.environ.get("SNN_NEAT_CACHE") or Path.home() / ".cache" / "snn_neat")
-    target = root / f"{name}_{key}.so"
-    if not target.exists():
-        root.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=root) as tmp:
-            src, out = Path(tmp) / f"{name}.c", Path(tmp) / f"{name}.so"
-            src.write_text(source)
-            proc = subprocess.run([cc, *FLAGS, str(src), "-o", str(out), "-lm"], capture_output=True, text=True)
-            if proc.returncode != 0:
-                warnings.warn(f"snn-neat: C kernel {name!r} did not compile; using the torch path\n{proc.stderr}",
-                              RuntimeWarning, stacklevel=3)
-                return None
-            os.replace(out, target)
-    return ctypes.CDLL(str(target))
+def _compiler() -> str | None:
+    return os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
 
 
-def load_c_library(name: str, source: str) -> ctypes.CDLL | None:
-    """The compiled library, or None (no compiler, build failed, or kernels disabled)."""
-    if not kernels_enabled():
-        return None
-    if name not in _cache:
+def _cache_root() -> Path:
+    return Path(os.environ.get("SNN_NEAT_CACHE") or Path.home() / ".cache" / "snn_neat")
+
+
+class _Build:
+    """A compiler process building one library into a temporary folder of the cache."""
+
+    def __init__(self, name: str, files: dict[str, str], main: str, cc: str, target: Path) -> None:
+        self.name, self.target, self.t0 = name, target, time.perf_counter()
+        self.path: Path | None = None  # the cached library, once built
+        self.tmp = tempfile.TemporaryDirectory(dir=target.parent)
+        folder = Path(self.tmp.name)
+        self.out, self.log = folder / f"{name}.so", folder / "cc.log"
         try:
-            _cache[name] = _build(name, source)
-        except OSError as exc:  # unwritable cache, unloadable library: fall back and say why
-            warnings.warn(f"snn-neat: C kernel {name!r} unavailable ({exc}); using the torch path",
-                          RuntimeWarning, stacklevel=2)
-            _cache[name] = None
-    return _cache[name]
+            for file_name, text in files.items():
+                (folder / file_name).write_text(text)
+            with open(self.log, "w") as log:  # a file, not a pipe: a long log cannot stall the compiler
+                self.proc = subprocess.Popen([cc, *FLAGS, str(folder / main), "-o", str(self.out), "-lm"],
+                                             stdout=subprocess.DEVNULL, stderr=log)
+        except OSError:  # a full disk, a compiler that will not start
+            self.tmp.cleanup()
+            raise
+
+    def finish(self) -> Path | None:
+        """Wait for the compiler; the cached library's path, or None (warned) if it failed."""
+        try:
+            if self.proc.wait() != 0:
+                warnings.warn(f"snn-neat: C kernel {self.name!r} did not compile; using the torch path\n"
+                              f"{self.log.read_text()}", RuntimeWarning, stacklevel=4)
+                return None
+            os.replace(self.out, self.target)
+        finally:
+            self.tmp.cleanup()
+        print(f"snn-neat: built C kernel {self.name!r} once for this machine "
+              f"({time.perf_counter() - self.t0:.1f} s, cached in {self.target.parent})", file=sys.stderr)
+        self.path = self.target
+        return self.path
+
+
+def _start(name: str, files: dict[str, str], main: str, cc: str) -> Path | _Build:
+    """The cached library built from ``files`` (name -> text; ``main`` the translation unit), or
+    its build, started."""
+    key_text = "\0".join(f"{k}\0{v}" for k, v in sorted(files.items()))
+    key = hashlib.sha256((key_text + " ".join(FLAGS) + cc + sys.platform + _cpu_signature()).encode()).hexdigest()[:16]
+    root = _cache_root()
+    target = root / f"{name}_{key}.so"
+    if target.exists():
+        return target
+    root.mkdir(parents=True, exist_ok=True)
+    return _Build(name, files, main, cc, target)
+
+
+def _compile(name: str, files: dict[str, str], main: str, cc: str) -> Path | None:
+    """Build ``files`` into the cache (or find them there); the .so path."""
+    build = _start(name, files, main, cc)
+    return build if isinstance(build, Path) else build.finish()
+
+
+def _library_files(source: Path, header: Path) -> dict[str, str]:
+    """``source``, ``header`` and the local headers they include, transitively (name -> text)."""
+    files: dict[str, str] = {}
+    pending = [source, header]
+    while pending:
+        path = pending.pop()
+        if path.name in files:
+            continue
+        files[path.name] = text = path.read_text()
+        pending += [path.parent / inc for inc in _LOCAL_INCLUDE.findall(text)]
+    return files
+
+
+def load_library(name: str, source: Path, header: Path) -> KernelLibrary | None:
+    """The kernel library built from ``source`` (which includes ``header``), or None.
+
+    None: no compiler, the build failed, the cache is unwritable, or kernels are disabled
+    (``SNN_NEAT_FUSED=0``); each but the last warns once with the reason.
+    """
+    return load_libraries([(name, source, header)])[0]
+
+
+def load_libraries(specs: Sequence[tuple[str, Path, Path]]) -> list[KernelLibrary | None]:
+    """``load_library`` for each ``(name, source, header)``; those not yet built compile side by
+    side (one compiler each, so a cold start waits for the slowest, not the sum)."""
+    if not kernels_enabled():
+        return [None] * len(specs)
+    if all(name in _cache for name, _, _ in specs):  # the kernels' every call: no lock
+        return [_cache[name] for name, _, _ in specs]  # type: ignore[misc]
+    with _lock:
+        cc = _compiler()
+        libs: dict[str, KernelLibrary | None] = {}
+        started: dict[str, tuple[Path | _Build, str]] = {}
+        for name, source, header in specs:
+            if name in _cache or name in libs:
+                continue
+            libs[name] = None
+            if cc is None:
+                continue
+            try:
+                files = _library_files(source, header)
+                started[name] = (_start(name, files, source.name, cc), files[header.name])
+            except OSError as exc:  # unreadable sources, unwritable cache: fall back and say why
+                _unavailable(name, exc)
+        running = [build for build, _ in started.values() if isinstance(build, _Build)]
+        while running:  # each finished as it ends, so that it reports its own build time
+            for build in [b for b in running if b.proc.poll() is not None]:
+                running.remove(build)
+                try:
+                    build.finish()
+                except OSError as exc:
+                    _unavailable(build.name, exc)
+            if running:
+                time.sleep(0.01)
+        for name, (build, header_text) in started.items():
+            path = build if isinstance(build, Path) else build.path
+            if path is not None:
+                try:
+                    libs[name] = KernelLibrary(ctypes.CDLL(str(path)), parse_prototypes(header_text), path)
+                except OSError as exc:  # unloadable library
+                    _unavailable(name, exc)
+        _cache.update(libs)  # only now: the lock-free check above must not see a library being built
+        return [_cache[name] for name, _, _ in specs]  # type: ignore[misc]
+
+
+def _unavailable(name: str, exc: OSError) -> None:
+    warnings.warn(f"snn-neat: C kernel {name!r} unavailable ({exc}); using the torch path", RuntimeWarning,
+                  stacklevel=4)

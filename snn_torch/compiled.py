@@ -4,10 +4,10 @@ Eager torch runs one substep of ``P`` recurrent networks as the batched matmul a
 elementwise kernels (Heun's two stages, the crossing time, the reset and its second
 integration), each reading and writing the whole ``[P, N]`` state. On a GPU at large ``P``
 that memory traffic is the whole cost; ``torch.compile`` fuses the elementwise work into a
-few kernels beside the matmul. On the CPU the C kernels (``snn_torch.functional.fused_cpu``,
-``tasks.fused_loop``) are faster still, so compiling is opt-in there.
+few kernels. On the CPU the C kernel (``snn_torch.functional.network_kernel``) is faster
+still, so compiling is opt-in there.
 
-The compiled function is ``recurrent_izhikevich_step`` itself (with spike counting), so the
+The compiled function is ``recurrent_izhikevich_substep`` itself (with spike counting), so the
 reference and the compiled step cannot drift apart in what they compute; on the CPU they
 agree bit for bit (tested). One compiled step serves every batch size (``dynamic=True``: no
 recompilation when finished episodes are compacted away) and is shared by every caller with
@@ -32,11 +32,11 @@ from snn_torch.functional.izhikevich import (
     check_dt,
     check_method,
 )
-from snn_torch.functional.recurrent import RecurrentState, recurrent_izhikevich_step
+from snn_torch.functional.recurrent import RecurrentState, recurrent_izhikevich_substep
 
 __all__ = ["CompiledSubstep", "eager_substep"]
 
-StepFn = Callable[[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor], tuple[Tensor, Tensor, Tensor, Tensor]]
+StepFn = Callable[..., tuple[Tensor, Tensor, Tensor, Tensor]]
 
 _lock = threading.Lock()
 # (params, dt_ms, method) -> the compiled step, one per process; or why compiling it failed
@@ -44,19 +44,20 @@ _compiled: dict[tuple, StepFn | str] = {}
 
 
 def eager_substep(i_ext: Tensor, state: RecurrentState, w_eff: Tensor, counts: Tensor, p: IzhikevichParams, *,
-                  dt_ms: float = DEFAULT_DT_MS, method: str = DEFAULT_METHOD) -> tuple[RecurrentState, Tensor]:
+                  dt_ms: float = DEFAULT_DT_MS, method: str = DEFAULT_METHOD,
+                  source: Tensor | None = None) -> tuple[RecurrentState, Tensor]:
     """The uncompiled reference: one substep (``dt_ms``, ms) of ``P`` recurrent networks, its
-    spikes added to ``counts``. Returns ``(state, counts + z)``; inputs are not checked (they
-    are inside a substep loop)."""
-    z, state = recurrent_izhikevich_step(i_ext, state, w_eff, p, dt_ms=dt_ms, method=method, validate=False)
-    return state, counts + z
+    spikes added to ``counts`` (``recurrent_izhikevich_substep``). Returns ``(state, counts + z)``;
+    inputs are not checked (they are inside a substep loop)."""
+    return recurrent_izhikevich_substep(i_ext, state, w_eff, counts, p, dt_ms=dt_ms, method=method, source=source)
 
 
 def _eager_step(p: IzhikevichParams, dt_ms: float, method: str) -> StepFn:
     """``eager_substep`` on plain tensors, the form that is compiled."""
-    def step(i_ext: Tensor, v: Tensor, u: Tensor, z: Tensor, w_eff: Tensor,
-             counts: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-        state, counts = eager_substep(i_ext, RecurrentState(v, u, z), w_eff, counts, p, dt_ms=dt_ms, method=method)
+    def step(i_ext: Tensor, v: Tensor, u: Tensor, z: Tensor, w_eff: Tensor, counts: Tensor,
+             source: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        state, counts = eager_substep(i_ext, RecurrentState(v, u, z), w_eff, counts, p, dt_ms=dt_ms, method=method,
+                                      source=source)
         return state.v, state.u, state.z, counts
 
     return step
@@ -113,9 +114,9 @@ class CompiledSubstep:
     def compiled(self) -> bool:
         return self._fn is not self.eager
 
-    def __call__(self, i_ext: Tensor, state: RecurrentState, w_eff: Tensor,
-                 counts: Tensor) -> tuple[RecurrentState, Tensor]:
-        args = (i_ext, state.v, state.u, state.z, w_eff, counts)
+    def __call__(self, i_ext: Tensor, state: RecurrentState, w_eff: Tensor, counts: Tensor,
+                 source: Tensor | None = None) -> tuple[RecurrentState, Tensor]:
+        args = (i_ext, state.v, state.u, state.z, w_eff, counts, source)
         if self.compiled:
             try:
                 v, u, z, counts = self._fn(*args)

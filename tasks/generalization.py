@@ -16,8 +16,8 @@ keep Gruau's absolute values. Every start lies strictly inside the failure limit
 A start counts as a success when the controller balances for ``steps`` control steps (default
 1000, Gruau's; the paper's Table II task asks 5000).
 
-Everything is batched: ``C`` controllers x ``S`` starts are one closed loop of ``C * S`` rows,
-ordered controller-major (row ``c * S + s`` runs controller ``c`` from start ``s``).
+Everything is batched: ``C`` controllers x ``S`` starts are one rollout of ``S`` episodes per
+controller (``evolution.rollout``: row ``c * S + s`` runs controller ``c`` from start ``s``).
 
     from tasks.generalization import start_grid, success_rate
     rate = success_rate(champion, config)  # [R, P]: fraction of the 625 starts balanced
@@ -31,12 +31,13 @@ import torch
 from torch import Tensor
 
 from evolution.config import NEATConfig
+from evolution.phenotype import SigmoidSpec, SpikingSpec, make_controller
 from evolution.population import Genomes
-from tasks.cartpole import DEFAULT_PLANT, CartPoleParams, cartpole_failed
-from tasks.controllers import SigmoidPolicy, SigmoidSpec, SpikingPolicy, SpikingSpec, closed_loop
-from tasks.experiments.cartpole import NONMARKOV
+from evolution.rollout import rollout
+from tasks.cartpole import DEFAULT_PLANT, CartPoleParams, CartPoleTask, cartpole_failed
+from tasks.experiments.cartpole import NONMARKOV, paper_spec
 
-__all__ = ["GRID_FRACTIONS", "GRID_STEPS", "grid_ranges", "start_grid", "repeat_genomes", "make_policy",
+__all__ = ["GRID_FRACTIONS", "GRID_STEPS", "grid_ranges", "start_grid", "make_policy",
            "steps_from_starts", "policy_success_rate", "success_rate", "check_starts"]
 
 GRID_FRACTIONS = (0.05, 0.25, 0.5, 0.75, 0.95)  # [Gruau96]
@@ -85,60 +86,46 @@ def check_starts(starts: Tensor, plant: CartPoleParams = DEFAULT_PLANT, *, name:
     return starts
 
 
-def repeat_genomes(genomes: Genomes, repeats: int) -> Genomes:
-    """Each of the ``R x P`` genomes ``repeats`` times: a ``[R * P, repeats]`` population
-    (flattened rows are controller-major, matching ``steps_from_starts``)."""
-    R, P = genomes.num_runs, genomes.pop_size
-    out = {}
-    for name, t in genomes.tensors().items():
-        flat = t.reshape(R * P, 1, *t.shape[2:])
-        out[name] = flat.expand(R * P, repeats, *t.shape[2:])
-    return Genomes(**out)
-
-
-def make_policy(genomes: Genomes, config: NEATConfig, controller: str = "snn", *, spiking: SpikingSpec | None = None,
-                sigmoid: SigmoidSpec | None = None, plant: CartPoleParams = DEFAULT_PLANT, tau_s: float = _TAU_S):
+def make_policy(genomes: Genomes, config: NEATConfig, controller: str = "snn", *,
+                spec: SpikingSpec | SigmoidSpec | None = None, plant: CartPoleParams = DEFAULT_PLANT,
+                tau_s: float = _TAU_S, backend: str = "auto"):
     """The non-Markov controller (``"snn"`` or ``"sigmoid"``) of every genome, batched as ``R * P`` rows."""
-    if controller == "snn":
-        return SpikingPolicy(genomes, config, SpikingSpec() if spiking is None else spiking, tau_s, plant)
-    if controller == "sigmoid":
-        return SigmoidPolicy(genomes, config, SigmoidSpec() if sigmoid is None else sigmoid, plant)
-    raise ValueError(f"controller must be 'snn' or 'sigmoid', got {controller!r}")
+    if controller not in ("snn", "sigmoid"):
+        raise ValueError(f"controller must be 'snn' or 'sigmoid', got {controller!r}")
+    spec = paper_spec("table2", controller) if spec is None else spec
+    return make_controller(genomes, config, _task(plant, tau_s, 1), spec, kind=controller, backend=backend)
 
 
-def steps_from_starts(policy, starts: Tensor, num_controllers: int, *, max_steps: int, tau_s: float = _TAU_S,
-                      plant: CartPoleParams = DEFAULT_PLANT) -> Tensor:
-    """Steps balanced ``[C, S]`` by ``C`` controllers from each of ``S`` starts, one closed loop.
-
-    ``policy`` must hold ``C * S`` rows, controller-major (``make_policy(repeat_genomes(g, S), ...)``).
-    """
-    starts = check_starts(starts, plant)
-    S = starts.shape[0]
-    state0 = starts.repeat(num_controllers, 1)  # row c * S + s = start s
-    steps, _ = closed_loop(policy, state0, tau_s=tau_s, max_steps=max_steps, plant=plant)
-    return steps.view(num_controllers, S)
+def _task(plant: CartPoleParams, tau_s: float, max_steps: int) -> CartPoleTask:
+    return CartPoleTask.nonmarkov(plant=plant, tau_s=tau_s, max_steps=max_steps)
 
 
-def policy_success_rate(policy, num_controllers: int, starts: Tensor | None = None, *, steps: int = GRID_STEPS,
-                        tau_s: float = _TAU_S, plant: CartPoleParams = DEFAULT_PLANT) -> Tensor:
+def steps_from_starts(policy, starts: Tensor, num_controllers: int | None = None, *, max_steps: int,
+                      tau_s: float = _TAU_S, plant: CartPoleParams = DEFAULT_PLANT) -> Tensor:
+    """Steps balanced ``[C, S]`` by each of the ``C`` controllers of ``policy`` from each of ``S``
+    starts, as one rollout of ``C x S`` episodes."""
+    starts = check_starts(starts, plant).to(device=policy.weight.device, dtype=policy.weight.dtype)
+    result = rollout(_task(plant, tau_s, max_steps), policy, episodes=starts.shape[0], starts=starts)
+    return result.steps
+
+
+def policy_success_rate(policy, num_controllers: int | None = None, starts: Tensor | None = None, *,
+                        steps: int = GRID_STEPS, tau_s: float = _TAU_S, plant: CartPoleParams = DEFAULT_PLANT) -> Tensor:
     """Fraction ``[C]`` (float64) of ``starts`` (default: the 625-state grid) that each of the
     ``C`` controllers in ``policy`` balances for ``steps`` control steps."""
     starts = start_grid(plant) if starts is None else starts
-    balanced = steps_from_starts(policy, starts, num_controllers, max_steps=steps, tau_s=tau_s, plant=plant)
+    balanced = steps_from_starts(policy, starts, max_steps=steps, tau_s=tau_s, plant=plant)
     return (balanced >= steps).to(torch.float64).mean(-1)
 
 
 def success_rate(genomes: Genomes, config: NEATConfig, *, controller: str = "snn", starts: Tensor | None = None,
-                 steps: int = GRID_STEPS, spiking: SpikingSpec | None = None, sigmoid: SigmoidSpec | None = None,
+                 steps: int = GRID_STEPS, spec: SpikingSpec | SigmoidSpec | None = None,
                  plant: CartPoleParams = DEFAULT_PLANT, tau_s: float = _TAU_S) -> Tensor:
     """Fraction ``[R, P]`` (float64) of the start states each genome balances for ``steps`` steps.
 
     All ``R * P`` genomes x ``S`` starts (default the 625-state grid) run as one batch.
     """
     starts = start_grid(plant, device=genomes.device, dtype=genomes.weight.dtype) if starts is None else starts
-    starts = check_starts(starts, plant).to(device=genomes.device, dtype=genomes.weight.dtype)
-    C = genomes.num_runs * genomes.pop_size
-    policy = make_policy(repeat_genomes(genomes, starts.shape[0]), config, controller, spiking=spiking,
-                         sigmoid=sigmoid, plant=plant, tau_s=tau_s)
-    rate = policy_success_rate(policy, C, starts, steps=steps, tau_s=tau_s, plant=plant)
+    policy = make_policy(genomes, config, controller, spec=spec, plant=plant, tau_s=tau_s)
+    rate = policy_success_rate(policy, starts=starts, steps=steps, tau_s=tau_s, plant=plant)
     return rate.view(genomes.num_runs, genomes.pop_size)

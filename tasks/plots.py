@@ -248,9 +248,12 @@ def plot_species_sizes(sizes: Tensor | np.ndarray, *, title: str = "") -> Figure
 
 
 def plot_evolution_progress(best: Tensor | np.ndarray, mean: Tensor | np.ndarray, sizes: Tensor | np.ndarray, *,
-                            max_fitness: float | None = None, title: str = "") -> Figure:
+                            max_fitness: float | None = None, title: str = "",
+                            fitness_label: str = "control steps balanced", unit: str = "steps") -> Figure:
     """One run's progress: best and mean fitness per generation above species sizes as a
-    stacked area (``sizes[generation, species]``). Redraw it each generation for a live plot."""
+    stacked area (``sizes[generation, species]``). Redraw it each generation for a live plot.
+    ``fitness_label``/``unit`` name the fitness (a return may be negative: the axis then
+    follows the data instead of starting at 0)."""
     b, m, s = _numpy(best), _numpy(mean), _numpy(sizes)
     fig = Figure(figsize=(7, 5.5), layout="constrained")
     ax_f, ax_s = fig.subplots(2, 1, sharex=True, height_ratios=[3, 2])
@@ -258,9 +261,10 @@ def plot_evolution_progress(best: Tensor | np.ndarray, mean: Tensor | np.ndarray
     ax_f.plot(gens, b, marker=".", color="tab:red", label="best")
     ax_f.plot(gens, m, marker=".", color="tab:blue", label="mean")
     if max_fitness is not None:
-        ax_f.axhline(max_fitness, color="grey", lw=0.8, ls="--", label=f"target ({max_fitness:g} steps)")
-    ax_f.set_ylabel("fitness (control steps balanced)")
-    ax_f.set_ylim(bottom=0)
+        ax_f.axhline(max_fitness, color="grey", lw=0.8, ls="--", label=f"target ({max_fitness:g} {unit})".replace(" )", ")"))
+    ax_f.set_ylabel(f"fitness ({fitness_label})")
+    if len(m) and float(np.min(m)) >= 0:
+        ax_f.set_ylim(bottom=0)
     ax_f.grid(alpha=0.3)
     ax_f.legend(loc="upper left")
     if not title and len(b):
@@ -431,6 +435,7 @@ class EvolutionHistory(BaseReporter):
                 out[g, col[k]] = c
         return out
 
-    def plot(self, *, max_fitness: float | None = None, title: str = "") -> Figure:
+    def plot(self, *, max_fitness: float | None = None, title: str = "",
+             fitness_label: str = "control steps balanced", unit: str = "steps") -> Figure:
         return plot_evolution_progress(self.best, self.mean, self.species_sizes(), max_fitness=max_fitness,
-                                       title=title)
+                                       title=title, fitness_label=fitness_label, unit=unit)

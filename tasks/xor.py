@@ -6,8 +6,8 @@ import torch
 from torch import Tensor
 
 from evolution.config import NEATConfig
-from evolution.phenotype import SigmoidNetworks
 from evolution.population import Genomes
+from snn_torch.modules.recurrent import PopulationRecurrentSigmoid
 
 __all__ = ["XOR_CONFIG", "xor_outputs", "xor_fitness", "xor_solved"]
 
@@ -21,12 +21,16 @@ XOR_CONFIG = NEATConfig(num_inputs=2, num_outputs=1, num_bias=1, feed_forward=Tr
 
 def xor_outputs(genomes: Genomes, config: NEATConfig) -> Tensor:
     """Network output for the four XOR patterns, ``[R, P, 4]``."""
-    R, P = genomes.num_runs, genomes.pop_size
-    net = SigmoidNetworks(genomes, config)
-    inputs = XOR_INPUTS.to(genomes.device, genomes.weight.dtype).expand(R, P, 4, 2)
-    # A feed-forward path is at most (hidden nodes + 1) genes long.
+    R, P, N = genomes.num_runs, genomes.pop_size, genomes.num_nodes
+    net = PopulationRecurrentSigmoid(genomes.weight.reshape(-1, N, N), genomes.enabled.reshape(-1, N, N),
+                                     num_clamped=config.num_inputs, num_bias=config.num_bias)
+    patterns = XOR_INPUTS.to(genomes.device, genomes.weight.dtype)
+    # Every genome on every pattern: row g * 4 + k runs genome g on pattern k.
+    network = torch.arange(R * P, device=genomes.device).repeat_interleave(4)
+    # A feed-forward path is at most (hidden nodes + 1) genes long: that many updates give its output exactly.
     updates = int(genomes.num_hidden(config).max()) + 1
-    return net.activate(inputs, updates)[..., 0]
+    values = net.control_step(patterns.repeat(R * P, 1), updates=updates, network=network)
+    return values[:, config.first_output].view(R, P, 4)
 
 
 def xor_fitness(genomes: Genomes, config: NEATConfig = XOR_CONFIG) -> Tensor:

@@ -7,7 +7,7 @@ import math
 import torch
 from torch import Tensor
 
-__all__ = ["firing_rate", "weighted_rate_force", "bang_bang_force"]
+__all__ = ["firing_rate", "weighted_rate_force", "bang_bang_force", "ordered_sum"]
 
 
 def firing_rate(spikes: Tensor, *, dt_ms: float, dim: int = 0) -> Tensor:
@@ -21,6 +21,24 @@ def firing_rate(spikes: Tensor, *, dt_ms: float, dim: int = 0) -> Tensor:
     if steps == 0:
         raise ValueError(f"spikes has no time steps along dim {dim}")
     return spikes.sum(dim) * (1000.0 / (steps * dt_ms))
+
+
+def ordered_sum(x: Tensor, dim: int = -1) -> Tensor:
+    """Sum along ``dim`` in index order with a float64 accumulator, rounded once to ``x``'s dtype.
+
+    ``x.sum()`` reduces in blocks whose shape depends on the tensor's size and layout, so a
+    row's sum could change with the batch it is in or with the number of (zero) slots beyond
+    its last term. Here the order is fixed: ``((0 + x_0) + x_1) + ...`` in float64, so exact
+    zeros anywhere change nothing. On the CPU this is ``cumsum`` (a sequential loop that
+    accumulates float32 in double); elsewhere an explicit loop over the slots.
+    """
+    if x.device.type == "cpu":
+        return torch.cumsum(x, dim, dtype=torch.float64).select(dim, -1).to(x.dtype) if x.shape[dim] else \
+            x.sum(dim)
+    acc = torch.zeros_like(x.select(dim, 0), dtype=torch.float64)
+    for k in range(x.shape[dim]):
+        acc = acc + x.select(dim, k).to(torch.float64)
+    return acc.to(x.dtype)
 
 
 def weighted_rate_force(
@@ -37,8 +55,8 @@ def weighted_rate_force(
     Returns:
         Force in ``(-f_max, f_max)``, shape ``rates.shape[:-1]``.
     """
-    drive = (rates * weights).sum(-1)
-    return f_max * (2.0 * torch.sigmoid(sigma * drive) - 1.0)
+    drive = ordered_sum(rates * weights, dim=-1)  # slot order: independent of batch and slot count
+    return f_max * (2.0 * (1.0 / (1.0 + torch.exp(-(sigma * drive)))) - 1.0)
 
 
 def bang_bang_force(drive: Tensor, *, threshold: float | Tensor, f_max: float = 10.0) -> Tensor:

@@ -3,8 +3,14 @@
 ``P`` networks of ``N`` neurons each, one weight matrix per network: ``weight[p, i, j]`` is
 the synapse from neuron ``i`` (pre) to neuron ``j`` (post), the NEAT connection slot
 ``(i, j)``. Semantics are synchronous with a one-step delay: at every step each neuron
-receives ``I = i_ext + sum_i w[i, j] z_prev[i]``, a single batched matmul for the whole
-population, so any recurrence (self loops included) needs no topological sort.
+receives ``I = i_ext + sum_i w[i, j] z_prev[i]``, so any recurrence (self loops included)
+needs no topological sort.
+
+The synaptic sum runs over presynaptic slots in ascending order (``ordered_synaptic_current``),
+not as a matmul: a matmul's blocking, and so its rounding, depends on the batch and matrix
+sizes, and a network's result must not depend on the batch it shares or on how many node
+slots the batch simulates (an unused slot adds exact zeros). The C kernel
+(``snn_torch.functional.network_kernel``) sums in the same order and equals this step bit for bit.
 
 The state may carry extra batch axes between ``P`` and ``N`` (``[P, B, N]``), for example
 several episodes per network.
@@ -36,6 +42,9 @@ __all__ = [
     "recurrent_init",
     "recurrent_izhikevich_step",
     "recurrent_izhikevich_run",
+    "recurrent_izhikevich_steps",
+    "recurrent_izhikevich_substep",
+    "ordered_synaptic_current",
 ]
 
 
@@ -80,10 +89,15 @@ def recurrent_init(
     return RecurrentState(v, u, torch.zeros_like(v))
 
 
-def _synaptic_current(z: Tensor, w_eff: Tensor) -> Tensor:
-    # [P, ..., N] -> [P, B, N] @ [P, N, N]: the one batched matmul of a step.
+def ordered_synaptic_current(z: Tensor, w_eff: Tensor) -> Tensor:
+    """``sum_i z[..., i] w_eff[:, i, :]`` for ``z [P, ..., N]`` and ``w_eff [P, N, N]``, summed
+    over ``i`` ascending from an exact 0 (``0 + t_0 + t_1 + ...``): the same bits for a row
+    whatever the batch size or the number of slots beyond its last synapse."""
     flat = z.reshape(z.shape[0], -1, z.shape[-1])
-    return torch.bmm(flat, w_eff).reshape(z.shape)
+    acc = torch.zeros_like(flat)
+    for i in range(flat.shape[-1]):
+        acc = acc + flat[:, :, i : i + 1] * w_eff[:, i : i + 1, :]
+    return acc.reshape(z.shape)
 
 
 def recurrent_izhikevich_step(
@@ -114,7 +128,7 @@ def recurrent_izhikevich_step(
         dt_ms = check_dt(dt_ms)
         _check_weights(w_eff, state.v)
         check_current("i_ext", i_ext, state.v)
-    i_total = i_ext + _synaptic_current(state.z, w_eff)
+    i_total = i_ext + ordered_synaptic_current(state.z, w_eff)
     z, (v, u) = izhikevich_step(
         i_total, IzhikevichState(state.v, state.u), p, dt_ms=dt_ms, method=method,
         spike_fn=spike_fn, substep_reset=substep_reset, validate=False,
@@ -171,3 +185,67 @@ def recurrent_izhikevich_run(
     if not spikes:
         return state.v.new_zeros((0, *state.v.shape)), state
     return torch.stack(spikes), state
+
+
+def recurrent_izhikevich_substep(
+    i_ext: Tensor, state: RecurrentState, w_eff: Tensor, counts: Tensor, p: IzhikevichParams, *,
+    dt_ms: float = DEFAULT_DT_MS, source: Tensor | None = None, method: str = DEFAULT_METHOD,
+    spike_fn: SpikeFn = heaviside, substep_reset: bool = True,
+) -> tuple[RecurrentState, Tensor]:
+    """One substep of ``recurrent_izhikevich_steps``, its spikes added to ``counts``.
+
+    ``source``: ``[P, S]`` spikes of the spike-source nodes ``0 .. S-1`` in this substep (their
+    ``v`` and ``u`` are held), or None. Returns ``(state, counts + z)``; inputs are not checked.
+    """
+    z_prev = state.z
+    n_src = 0 if source is None else source.shape[-1]
+    if n_src:
+        source = source.to(z_prev.dtype)
+        z_prev = torch.cat([source, z_prev[:, n_src:]], dim=1)
+    i_total = i_ext + ordered_synaptic_current(z_prev, w_eff)
+    z, (v, u) = izhikevich_step(
+        i_total, IzhikevichState(state.v, state.u), p, dt_ms=dt_ms, method=method,
+        spike_fn=spike_fn, substep_reset=substep_reset, validate=False,
+    )
+    if n_src:  # sources keep their v and u; their spikes are the given ones
+        v = torch.cat([state.v[:, :n_src], v[:, n_src:]], dim=1)
+        u = torch.cat([state.u[:, :n_src], u[:, n_src:]], dim=1)
+        z = torch.cat([source, z[:, n_src:]], dim=1)
+    return RecurrentState(v, u, z), counts + z
+
+
+def recurrent_izhikevich_steps(
+    i_ext: Tensor,
+    state: RecurrentState,
+    w_eff: Tensor,
+    p: IzhikevichParams,
+    *,
+    substeps: int,
+    dt_ms: float = DEFAULT_DT_MS,
+    source_spikes: Tensor | None = None,
+    method: str = DEFAULT_METHOD,
+    spike_fn: SpikeFn = heaviside,
+    substep_reset: bool = True,
+) -> tuple[Tensor, RecurrentState]:
+    """``substeps`` steps under a constant external current: one control step of ``P`` networks.
+
+    Args:
+        i_ext: external current (mV/ms), ``[P, N]``, the same in every substep.
+        state: ``RecurrentState`` of ``[P, N]`` tensors (not modified).
+        w_eff: effective weights ``[P, N, N]`` (pre x post, mV/ms per spike), already masked.
+        p: neuron parameters; dt_ms: substep (ms); substeps: how many.
+        source_spikes: ``[P, substeps, S]`` spikes (0 or 1) of spike-source nodes ``0 .. S-1``
+            in each substep (e.g. Bernoulli-coded inputs): their ``z`` is set to these and their
+            ``v`` and ``u`` are held. None: every node is a neuron.
+
+    Returns:
+        ``(counts, state)``: spikes per node over the substeps ``[P, N]`` (sources included),
+        and the state after them. This is the definition the C kernel repeats bit for bit.
+    """
+    counts = torch.zeros_like(state.v)
+    for q in range(substeps):
+        state, counts = recurrent_izhikevich_substep(
+            i_ext, state, w_eff, counts, p, dt_ms=dt_ms, method=method, spike_fn=spike_fn,
+            substep_reset=substep_reset, source=None if source_spikes is None else source_spikes[:, q],
+        )
+    return counts, state

@@ -8,36 +8,59 @@ neat-python "full" start, reported as a sensitivity check.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 
 import torch
 from torch import Tensor
 
 from evolution.config import NEATConfig
+from evolution.phenotype import SigmoidSpec, SpikingSpec
 from evolution.population import Genomes
-from tasks.cartpole import DEFAULT_PLANT, CartPoleParams
-from tasks.controllers import (
-    MARKOV_OBSERVE,
-    MarkovSpikingPolicy,
-    MarkovSpikingSpec,
-    SigmoidPolicy,
-    SigmoidSpec,
-    SpikingPolicy,
-    SpikingSpec,
-    closed_loop,
-    markov_limits,
-)
+from evolution.rollout import TaskFitness
+from tasks.cartpole import DEFAULT_PLANT, THETA0_RAD, CartPoleParams, CartPoleTask
 
-__all__ = ["CONTROLLERS", "GA_PRESETS", "GA_CHOICES", "TUNED_GA", "ga_overrides", "ga_choice", "describe_ga", "NONMARKOV", "MARKOV", "controller_config", "nonmarkov_start", "nonmarkov_fitness",
-           "markov_config", "markov_fitness"]
+__all__ = ["PAPER_SPECS", "paper_task", "paper_spec", "CONTROLLERS", "GA_PRESETS", "GA_CHOICES", "TUNED_GA", "ga_overrides", "ga_choice", "describe_ga", "NONMARKOV", "MARKOV", "controller_config", "nonmarkov_start", "nonmarkov_fitness",
+           "markov_config", "markov_fitness", "markov_start"]
 
 CONTROLLERS = ("snn", "sigmoid")
 # [Qiu19] Table II: tau 0.01 s, start theta = 3 degrees, success at 5000 steps.
-NONMARKOV = {"tau_s": 0.01, "theta0_rad": math.radians(3.0), "max_steps": 5000}
+NONMARKOV = {"tau_s": 0.01, "theta0_rad": THETA0_RAD, "max_steps": 5000}
 # [Qiu19] Table I: tau 0.02 s, success at 100,000 steps. The paper gives no start state for
 # this task; we use Table II's (theta 3 degrees, all else 0).
-MARKOV = {"tau_s": 0.02, "theta0_rad": math.radians(3.0), "max_steps": 100_000}
+MARKOV = {"tau_s": 0.02, "theta0_rad": THETA0_RAD, "max_steps": 100_000}
+
+# Each controller's coding on each table: the paper's controllers as users of the generic
+# phenotype. Table II: current-coded x and theta, F = 10 (2 sigmoid(sigma sum w_i r_i) - 1) over a
+# 4-step (40 ms) rate window (SpikingSpec's defaults). Table I: [Qiu19] "the normalized input
+# variables are encoded as a probability to generate a spike" in each 0.5 ms substep (up to
+# 1000 Hz), and the output decodes as in Table II (Fig. 5's caption) from the rates of the nodes
+# wired to it over the last control step (20 ms), each relative to its rate at rest, with a
+# bang-bang force +-10 N on the sign of the drive. Sigmoid NEAT: F = 10 (2 y - 1) (Table I: +-10 N
+# on y > 0.5).
+PAPER_SPECS: dict[tuple[str, str], SpikingSpec | SigmoidSpec] = {
+    ("table2", "snn"): SpikingSpec(),
+    ("table2", "sigmoid"): SigmoidSpec(),
+    ("table1", "snn"): SpikingSpec(encoder="bernoulli", input_rate_max_hz=1000.0, decoder="bang_bang",
+                                   rate_window_steps=1, rest_relative=True, threshold=0.0),
+    ("table1", "sigmoid"): SigmoidSpec(decoder="bang_bang"),
+}
+
+
+def paper_task(table: str, *, plant: CartPoleParams = DEFAULT_PLANT, max_steps: int | None = None) -> CartPoleTask:
+    """The cart-pole task of ``table`` (``"table1"``: Markov, ``"table2"``: non-Markov)."""
+    extra = {} if max_steps is None else {"max_steps": max_steps}
+    if table == "table2":
+        return CartPoleTask.nonmarkov(plant=plant, **extra)
+    if table == "table1":
+        return CartPoleTask.markov(plant=plant, **extra)
+    raise ValueError(f"table must be 'table1' or 'table2', got {table!r}")
+
+
+def paper_spec(table: str, controller: str) -> SpikingSpec | SigmoidSpec:
+    """The coding of ``controller`` (``"snn"`` or ``"sigmoid"``) on ``table`` (``PAPER_SPECS``)."""
+    if (table, controller) not in PAPER_SPECS:
+        raise ValueError(f"no paper controller {controller!r} for {table!r}; controllers: {CONTROLLERS}")
+    return PAPER_SPECS[(table, controller)]
 
 
 # GA settings, as named presets over NEATConfig. "neat-c++": NEATConfig's defaults ([NEAT02],
@@ -114,31 +137,16 @@ def controller_config(controller: str, *, self_loops: bool = False, ga: str = "n
 
 def nonmarkov_start(batch: int, *, device: str | torch.device = "cpu", dtype: torch.dtype = torch.float32) -> Tensor:
     """All state variables 0 except theta = 3 degrees, ``[batch, 4]``."""
-    s = torch.zeros(batch, 4, device=device, dtype=dtype)
-    s[:, 2] = NONMARKOV["theta0_rad"]
-    return s
+    return CartPoleTask.nonmarkov().reset(batch, device=device, dtype=dtype)
 
 
-def nonmarkov_fitness(controller: str, config: NEATConfig, *, spiking: SpikingSpec | None = None,
-                      sigmoid: SigmoidSpec | None = None, plant: CartPoleParams = DEFAULT_PLANT,
-                      max_steps: int | None = None) -> Callable[[Genomes], Tensor]:
-    """``fitness_fn(genomes) -> [R, P]``: control steps balanced (the paper's fitness)."""
-    spiking = SpikingSpec() if spiking is None else spiking
-    sigmoid = SigmoidSpec() if sigmoid is None else sigmoid
-    steps_max = NONMARKOV["max_steps"] if max_steps is None else max_steps
-    tau = NONMARKOV["tau_s"]
-
-    def fitness(genomes: Genomes) -> Tensor:
-        if controller == "snn":
-            policy = SpikingPolicy(genomes, config, spiking, tau, plant)
-        else:
-            policy = SigmoidPolicy(genomes, config, sigmoid, plant, tau_s=tau)
-        B = genomes.num_runs * genomes.pop_size
-        steps, _ = closed_loop(policy, nonmarkov_start(B, device=genomes.device), tau_s=tau,
-                               max_steps=steps_max, plant=plant)
-        return steps.view(genomes.num_runs, genomes.pop_size).to(torch.float64)
-
-    return fitness
+def nonmarkov_fitness(controller: str, config: NEATConfig, *, spec: SpikingSpec | SigmoidSpec | None = None,
+                      plant: CartPoleParams = DEFAULT_PLANT, max_steps: int | None = None,
+                      backend: str = "auto") -> Callable[[Genomes], Tensor]:
+    """``fitness_fn(genomes) -> [R, P]``: control steps balanced on Table II's task (the paper's fitness)."""
+    spec = paper_spec("table2", controller) if spec is None else spec
+    return TaskFitness(paper_task("table2", plant=plant, max_steps=max_steps), config, controller, spec,
+                       backend=backend)
 
 
 def markov_config(controller: str, *, self_loops: bool = False, ga: str = "neat-c++", **overrides) -> NEATConfig:
@@ -157,29 +165,13 @@ def markov_config(controller: str, *, self_loops: bool = False, ga: str = "neat-
 
 
 def markov_start(batch: int, *, device: str | torch.device = "cpu", dtype: torch.dtype = torch.float32) -> Tensor:
-    s = torch.zeros(batch, 4, device=device, dtype=dtype)
-    s[:, 2] = MARKOV["theta0_rad"]
-    return s
+    return CartPoleTask.markov().reset(batch, device=device, dtype=dtype)
 
 
-def markov_fitness(controller: str, config: NEATConfig, *, spiking: MarkovSpikingSpec | None = None,
-                   sigmoid: SigmoidSpec | None = None, plant: CartPoleParams = DEFAULT_PLANT,
-                   max_steps: int | None = None) -> Callable[[Genomes], Tensor]:
+def markov_fitness(controller: str, config: NEATConfig, *, spec: SpikingSpec | SigmoidSpec | None = None,
+                   plant: CartPoleParams = DEFAULT_PLANT, max_steps: int | None = None,
+                   backend: str = "auto") -> Callable[[Genomes], Tensor]:
     """``fitness_fn(genomes) -> [R, P]``: control steps balanced on the Markov task (Table I)."""
-    spiking = MarkovSpikingSpec() if spiking is None else spiking
-    sigmoid = SigmoidSpec() if sigmoid is None else sigmoid
-    steps_max = MARKOV["max_steps"] if max_steps is None else max_steps
-    tau = MARKOV["tau_s"]
-
-    def fitness(genomes: Genomes) -> Tensor:
-        if controller == "snn":
-            policy = MarkovSpikingPolicy(genomes, config, spiking, tau, plant)
-        else:
-            policy = SigmoidPolicy(genomes, config, sigmoid, plant, tau_s=tau, observe=MARKOV_OBSERVE,
-                                   limits=markov_limits(plant), bang_bang=True)
-        B = genomes.num_runs * genomes.pop_size
-        steps, _ = closed_loop(policy, markov_start(B, device=genomes.device), tau_s=tau, max_steps=steps_max,
-                               plant=plant)
-        return steps.view(genomes.num_runs, genomes.pop_size).to(torch.float64)
-
-    return fitness
+    spec = paper_spec("table1", controller) if spec is None else spec
+    return TaskFitness(paper_task("table1", plant=plant, max_steps=max_steps), config, controller, spec,
+                       backend=backend)

@@ -26,71 +26,64 @@ import torch
 from torch import Tensor
 
 from evolution.genome_io import load_genome
+from evolution.phenotype import SpikingController, SpikingSpec, SpikingState
 from evolution.population import Genomes
-from snn_torch.functional.fused_cpu import fused_recurrent_izhikevich_steps
-from snn_torch.functional.recurrent import recurrent_init, recurrent_izhikevich_step
-from tasks.cartpole import DEFAULT_PLANT
-from tasks.controllers import SpikingPolicy, SpikingSpec, closed_loop, normalized_inputs
-from tasks.experiments.cartpole import NONMARKOV, controller_config, nonmarkov_start
+from evolution.rollout import rollout
+from snn_torch.modules.coding import RateWindow, RateWindowState
+from tasks.cartpole import CartPoleTask
+from tasks.experiments.cartpole import NONMARKOV, controller_config
 
-__all__ = ["WipedStatePolicy", "StaticMapPolicy", "ablation_steps"]
+__all__ = ["WipedStateController", "StaticMapController", "ablation_steps"]
 
 
-class WipedStatePolicy(SpikingPolicy):
+def _rest(self: SpikingController, state: SpikingState) -> SpikingState:
+    v = state.neurons.v
+    window = RateWindowState(torch.zeros_like(state.window.history), 0)
+    return state._replace(neurons=self.network.initial_state(v), window=window)
+
+
+class WipedStateController(SpikingController):
     """The champion with its network state and rate window reset before every control step."""
 
-    def act(self, plant_state: Tensor) -> tuple[Tensor, Tensor]:
-        self.state = recurrent_init(self.state.v.shape, self.spec.neuron, dtype=self.state.v.dtype,
-                                    device=self.state.v.device)
-        self.history.zero_()
-        self.step_index = 0
-        return super().act(plant_state)
+    def act(self, obs01: Tensor, state: SpikingState):
+        return super().act(obs01, _rest(self, state))
 
 
-class StaticMapPolicy(SpikingPolicy):
-    """A memoryless map of (x, theta): from rest, settle ``settle_ms``, then decode one window."""
+class StaticMapController(SpikingController):
+    """A memoryless map of (x, theta): from rest, settle ``settle_ms``, then decode the rates of
+    one window of ``rate_window_steps`` control steps."""
 
     settle_ms: float = 160.0
 
-    def _run(self, i_ext: Tensor, state, substeps: int):
-        if self.fused:
-            return fused_recurrent_izhikevich_steps(i_ext, state, self.w, self.spec.neuron, dt_ms=self.spec.dt_ms,
-                                                    substeps=substeps)
-        counts = torch.zeros_like(i_ext)
-        for _ in range(substeps):
-            z, state = recurrent_izhikevich_step(i_ext, state, self.w, self.spec.neuron, dt_ms=self.spec.dt_ms,
-                                                 validate=False)
-            counts = counts + z
-        return counts, state
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        W = self.spec.rate_window_steps
+        self.window = RateWindow(1, W * self.window.period_s)  # the whole window measured as one step
+        self.settle_substeps, self.window_substeps = int(round(self.settle_ms / self.spec.dt_ms)), W * self.substeps
 
-    def act(self, plant_state: Tensor) -> tuple[Tensor, Tensor]:
-        spec = self.spec
-        i_ext = torch.full_like(self.state.v, spec.i_background)
-        i_ext[:, :2] += spec.i_input_max * normalized_inputs(plant_state, self.plant).to(i_ext.dtype)
-        state = recurrent_init(self.state.v.shape, spec.neuron, dtype=self.state.v.dtype, device=self.state.v.device)
-        _, state = self._run(i_ext, state, int(round(self.settle_ms / spec.dt_ms)))
-        window = spec.rate_window_steps * self.substeps
-        counts, _ = self._run(i_ext, state, window)
-        rates = counts / (spec.rate_window_steps * self.window_s)  # Hz
-        drive = torch.cumsum(rates * self.w_out, -1)[:, -1]
-        return 10.0 * (2.0 / (1.0 + torch.exp(-self.sigma * drive)) - 1.0), counts
+    def act(self, obs01: Tensor, state: SpikingState):
+        fresh = _rest(self, state)
+        try:
+            self.substeps = self.settle_substeps
+            _, settled, _ = super().act(obs01, fresh)
+            self.substeps = self.window_substeps
+            action, _, counts = super().act(obs01, fresh._replace(neurons=settled.neurons))
+        finally:
+            self.substeps = self.window_substeps // self.spec.rate_window_steps
+        return action, state, counts
 
 
 def ablation_steps(genomes: Genomes, *, max_steps: int = NONMARKOV["max_steps"],
                    spec: SpikingSpec | None = None) -> dict[str, Tensor]:
     """Steps balanced from the paper's start per genome, for each way of running it."""
-    spec = SpikingSpec() if spec is None else spec
     cfg = controller_config("snn")
-    tau = NONMARKOV["tau_s"]
-    B = genomes.num_runs * genomes.pop_size
+    task = CartPoleTask.nonmarkov(max_steps=max_steps)
     out = {}
-    for name, cls, fused_loop in (("as evolved", SpikingPolicy, True), ("state wiped", WipedStatePolicy, False),
-                                  ("static map", StaticMapPolicy, False)):
-        policy = cls(genomes, cfg, spec, tau, DEFAULT_PLANT)
-        policy.loop_fused = policy.loop_fused and fused_loop  # the ablations step in Python
-        steps, _ = closed_loop(policy, nonmarkov_start(B, dtype=genomes.weight.dtype), tau_s=tau,
-                               max_steps=max_steps)
-        out[name] = steps
+    for name, cls in (("as evolved", SpikingController), ("state wiped", WipedStateController),
+                      ("static map", StaticMapController)):
+        controller = cls(genomes, cfg, spec, period_s=task.control_period_s, action_max=task.action_max,
+                         observation_size=task.observation_size)
+        out[name] = rollout(task, controller).steps[:, 0]
     return out
 
 

@@ -27,7 +27,6 @@ from evolution.checkpoint import atomic_torch_save, load_checkpoint_dict
 from evolution.config import NEATConfig
 from evolution.neat import NEAT
 from evolution.population import Genomes
-from tasks.cartpole import DEFAULT_PLANT
 
 __all__ = ["PAPER", "TASKS", "ControllerRuns", "ReproduceError", "run_controller", "summarize"]
 
@@ -252,28 +251,20 @@ MARKOV_RECORD_STEPS = 1000
 
 def _record_episode(r: ControllerRuns, task: str, run: int) -> tuple[dict, float]:
     """One champion's episode from the task's start state, recorded step by step; and tau (s)."""
-    from tasks import controllers as ctl
+    from evolution.phenotype import make_controller
+    from evolution.rollout import rollout
     from tasks.experiments import cartpole as cp
 
     one = r.champions.select_runs([run])
-    if task == "table2":
-        tau, steps, start = cp.NONMARKOV["tau_s"], cp.NONMARKOV["max_steps"], cp.nonmarkov_start
-        if r.controller == "snn":
-            policy = ctl.SpikingPolicy(one, r.config, ctl.SpikingSpec(), tau, DEFAULT_PLANT)
-        else:
-            policy = ctl.SigmoidPolicy(one, r.config, ctl.SigmoidSpec(), DEFAULT_PLANT, tau_s=tau)
-    else:
-        tau, steps, start = cp.MARKOV["tau_s"], MARKOV_RECORD_STEPS, cp.markov_start
-        if r.controller == "snn":
-            policy = ctl.MarkovSpikingPolicy(one, r.config, ctl.MarkovSpikingSpec(), tau, DEFAULT_PLANT)
-        else:
-            policy = ctl.SigmoidPolicy(one, r.config, ctl.SigmoidSpec(), DEFAULT_PLANT, tau_s=tau,
-                                       observe=ctl.MARKOV_OBSERVE, limits=ctl.markov_limits(DEFAULT_PLANT),
-                                       bang_bang=True)
-    _, trace = ctl.closed_loop(policy, start(1, dtype=one.weight.dtype), tau_s=tau, max_steps=steps, record=True)
-    trace = {k: v[:, 0] for k, v in trace.items()}
-    trace["nodes"] = getattr(policy, "nodes", None)
-    return trace, tau
+    steps = None if task == "table2" else MARKOV_RECORD_STEPS
+    plant_task = cp.paper_task(task, max_steps=steps)
+    controller = make_controller(one, r.config, plant_task, cp.paper_spec(task, r.controller), kind=r.controller)
+    trace = rollout(plant_task, controller, record=True).trace
+    state = trace["state"][:, 0]
+    out = {"x": state[:, 0], "theta": state[:, 2], "force": trace["action"][:, 0, 0],
+           "activity": trace["activity"][:, 0],
+           "nodes": controller.nodes if r.controller == "snn" else None}
+    return out, plant_task.control_period_s
 
 
 def _example_run(r: ControllerRuns) -> int:

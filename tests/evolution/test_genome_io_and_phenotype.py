@@ -8,9 +8,11 @@ import torch
 from evolution.checkpoint import CheckpointError
 from evolution.genome_io import genome_to_dict, load_genome, save_genome, to_networkx
 from evolution.mutate import mutate_add_connection, mutate_add_node
-from evolution.phenotype import SigmoidNetworks, SpikingNetworks
+from evolution.phenotype import SigmoidController, SigmoidSpec, SpikingController, SpikingSpec
 from evolution.population import Genomes
+from snn_torch import PopulationRecurrentIzhikevich
 from snn_torch.functional import QIU2019, masked_weights, recurrent_init, recurrent_izhikevich_run
+from snn_torch.modules.recurrent import PopulationRecurrentSigmoid
 from tests.evolution.helpers import population, small_config
 
 
@@ -82,7 +84,12 @@ def test_sigmoid_phenotype_computes_a_hand_wired_xor():
     node[..., :6] = True
     g = Genomes(weight, conn, conn.clone(), node, torch.ones(1, 1))
     x = torch.tensor([[0.0, 0.0], [0.0, 1.0], [1.0, 0.0], [1.0, 1.0]])
-    out = SigmoidNetworks(g, cfg).activate(x.expand(1, 1, 4, 2), updates=2)[..., 0]
+    # The genome as a one-network layer; the 4 input rows all run network 0, two updates
+    # (the depth of the XOR net) from node values 0.
+    net = PopulationRecurrentSigmoid(g.weight.reshape(1, N, N), g.enabled.reshape(1, N, N),
+                                     num_clamped=cfg.num_inputs, num_bias=cfg.num_bias)
+    rows = torch.zeros(4, dtype=torch.int64)
+    out = net.control_step(x, updates=2, network=rows)[:, cfg.first_output]
 
     def s(v):
         return 1 / (1 + math.exp(-4.9 * v))
@@ -91,7 +98,13 @@ def test_sigmoid_phenotype_computes_a_hand_wired_xor():
     for a, b in x.tolist():
         h1, h2 = s(2 * a + 2 * b - 1), s(2 * a + 2 * b - 3)
         expected.append(s(2 * h1 - 4 * h2 - 0.5))
-    torch.testing.assert_close(out[0, 0], torch.tensor(expected))
+    expected = torch.tensor(expected)
+    torch.testing.assert_close(out, expected)
+    # The genome's controller: the same network, force F = 10 (2 y - 1) from the output y.
+    controller = SigmoidController(g, cfg, SigmoidSpec(updates_per_step=2), action_max=10.0, observation_size=2)
+    action, _, values = controller.act(x, controller.initial_state(rows))
+    assert torch.equal(values[:, controller.outputs[0]], out)
+    torch.testing.assert_close(action[:, 0], 10.0 * (2.0 * expected - 1.0))
 
 
 def test_spiking_phenotype_equals_the_snn_torch_layer():
@@ -99,18 +112,35 @@ def test_spiking_phenotype_equals_the_snn_torch_layer():
     g = _grown(cfg, rounds=4)
     with torch.no_grad():
         g.weight.mul_(20.0)
-    current = torch.rand(2, 5, 2) * 15.0
-    net = SpikingNetworks(g, cfg, i_background=4.0)
-    counts = net.step(current, substeps=40)
-    # The same networks through snn_torch directly.
-    w = masked_weights(g.weight.reshape(10, cfg.num_nodes, cfg.num_nodes), g.enabled.reshape(10, cfg.num_nodes, cfg.num_nodes))
-    i_ext = torch.full((40, 10, cfg.num_nodes), 4.0)
-    i_ext[..., :2] += current.reshape(10, 2)
-    z, _ = recurrent_izhikevich_run(i_ext, recurrent_init((10, cfg.num_nodes), QIU2019), w, QIU2019)
-    assert torch.equal(counts.reshape(10, -1), z.sum(0))
+    N = cfg.num_nodes
+    obs01 = torch.rand(10, 2)  # normalised inputs of the 2 x 5 genomes
+    # The controller: input k gets 15 * x_k (mV/ms), every neuron 4 mV/ms; a spike adds the weight
+    # (mV/ms) for one 0.5 ms substep (synapse_kick_mv = dt_ms); one control step is 40 substeps.
+    spec = SpikingSpec(dt_ms=0.5, i_background=4.0, i_input_max=15.0, synapse_kick_mv=0.5)
+    controller = SpikingController(g, cfg, spec, period_s=0.02, action_max=10.0, observation_size=2)
+    assert controller.substeps == 40
+    rows = torch.arange(10)
+    _, state, counts = controller.act(obs01, controller.initial_state(rows))
+    # The same networks through snn_torch directly, over every node slot.
+    w = masked_weights(g.weight.reshape(10, N, N), g.enabled.reshape(10, N, N))
+    i_ext = torch.full((40, 10, N), 4.0)
+    i_ext[..., :2] += 15.0 * obs01
+    z, _ = recurrent_izhikevich_run(i_ext, recurrent_init((10, N), QIU2019), w, QIU2019)
+    assert torch.equal(counts, z.sum(0)[:, controller.nodes])
     assert counts.sum() > 0
-    # State persists across control steps until reset.
-    more = net.step(current, substeps=40)
-    net.reset()
-    again = net.step(current, substeps=40)
+    # ... and through the population layer's control step (C kernel and torch step).
+    i_step = torch.zeros(10, N)
+    i_step[:, :2] = 15.0 * obs01
+    for backend in ("auto", "torch"):
+        layer = PopulationRecurrentIzhikevich(g.weight.reshape(10, N, N), g.enabled.reshape(10, N, N), QIU2019,
+                                              i_background=4.0, backend=backend)
+        full, layer_state = layer.control_step(i_step, substeps=40)
+        assert torch.equal(full, z.sum(0)), backend
+        # State persists across control steps until reset (a fresh initial state).
+        more, _ = layer.control_step(i_step, layer_state, substeps=40)
+        again, _ = layer.control_step(i_step, layer.initial_state(i_step), substeps=40)
+        assert torch.equal(again, full) and not torch.equal(more, full), backend
+    # The controller's state persists the same way.
+    _, _, more = controller.act(obs01, state)
+    _, _, again = controller.act(obs01, controller.initial_state(rows))
     assert torch.equal(again, counts) and not torch.equal(more, counts)

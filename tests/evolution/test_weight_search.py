@@ -7,16 +7,14 @@ from evotorch.algorithms import SNES
 from evotorch.logging import PandasLogger, StdOutLogger
 
 import evolution.weight_search as ws
-from evolution import NEAT, load_genome, save_genome
+from evolution import NEAT, load_genome, make_controller, rollout, save_genome
 from evolution.weight_search import FixedTopologyProblem
-from tasks.cartpole import DEFAULT_PLANT, cartpole_failed
-from tasks.controllers import SpikingPolicy, SpikingSpec, closed_loop
+from tasks.cartpole import CartPoleTask, cartpole_failed
 from tasks.experiments.cartpole import controller_config, nonmarkov_fitness
 from tasks.generalization import (
     grid_ranges,
     make_policy,
     policy_success_rate,
-    repeat_genomes,
     start_grid,
     steps_from_starts,
     success_rate,
@@ -25,6 +23,7 @@ from tasks.generalization import (
 SNN_CFG = controller_config("snn", max_hidden=2)  # nodes: 0, 1 inputs; 2 output; 3, 4 hidden
 SIG_CFG = controller_config("sigmoid", max_hidden=2)  # nodes: 0, 1 inputs; 2 bias; 3 output; 4, 5 hidden
 GROWN_CFG = controller_config("snn", max_hidden=4, pop_size=12, node_add_prob=0.5, conn_add_prob=0.5)
+TASK = CartPoleTask.nonmarkov()  # [Qiu19] Table II: x and theta observed, tau 0.01 s
 
 
 @pytest.fixture(autouse=True)
@@ -62,14 +61,20 @@ def _grown():
 def test_batched_evaluation_equals_each_solution_alone(controller, cfg, monkeypatch):
     # Exact equality: fitness is a mean of integer step counts, and every batch row runs the
     # same float operations on its own data (rows never mix), so batching cannot move a
-    # failure step; compaction is exact too (tests/tasks/test_controllers.py).
-    problem = FixedTopologyProblem(cfg, _mask(cfg), controller=controller, starts=_starts(), max_steps=300, seed=1)
+    # failure step; the rollout's compaction of finished rows is exact too.
+    problem = FixedTopologyProblem(cfg, _mask(cfg), task=TASK, controller=controller, starts=_starts(),
+                                   max_steps=300, seed=1)
     batch = problem.generate_batch(8)
     loops = []
-    real = ws.steps_from_starts
-    monkeypatch.setattr(ws, "steps_from_starts", lambda *a, **k: loops.append(a[0]) or real(*a, **k))
+    real = ws.rollout
+
+    def counted(task, policy, **kwargs):
+        loops.append((policy.num_genomes, kwargs["episodes"]))
+        return real(task, policy, **kwargs)
+
+    monkeypatch.setattr(ws, "rollout", counted)
     problem.evaluate(batch)
-    assert len(loops) == 1  # the whole population x 3 starts: one closed loop
+    assert loops == [(8, 3)]  # the whole population x 3 starts: one rollout
     monkeypatch.undo()
     batched = batch.evals.flatten().double()
     assert len(set(batched.tolist())) > 3  # the solutions really differ
@@ -78,15 +83,15 @@ def test_batched_evaluation_equals_each_solution_alone(controller, cfg, monkeypa
         g = problem.to_genomes(batch.values[k])
         per_start = []
         for s in range(3):
-            policy = make_policy(g, cfg, controller)
-            steps, _ = closed_loop(policy, starts[s : s + 1], tau_s=0.01, max_steps=300)
-            per_start.append(steps.item())
+            alone = make_controller(g, cfg, TASK, kind=controller)
+            result = rollout(TASK, alone, episodes=1, starts=starts[s : s + 1], max_steps=300)
+            per_start.append(result.steps.item())
         assert batched[k].item() == sum(per_start) / 3
         assert problem.fitness(batch.values[k]).item() == batched[k].item()
 
 
 def test_short_snes_run_improves_mean_fitness(capsys):
-    problem = FixedTopologyProblem(SNN_CFG, _mask(SNN_CFG), max_steps=500, seed=0)
+    problem = FixedTopologyProblem(SNN_CFG, _mask(SNN_CFG), task=TASK, max_steps=500, seed=0)
     torch.manual_seed(0)
     searcher = SNES(problem, popsize=24, stdev_init=1.0, center_init=problem.initial_solution())
     StdOutLogger(searcher, interval=5)
@@ -103,7 +108,7 @@ def test_short_snes_run_improves_mean_fitness(capsys):
 
 def test_solution_to_genomes_round_trip(tmp_path):
     pop = _grown()
-    problem = FixedTopologyProblem.from_genome(pop, GROWN_CFG, run=1, index=4)
+    problem = FixedTopologyProblem.from_genome(pop, GROWN_CFG, run=1, index=4, task=TASK)
     champion = pop.select_runs([1]).gather(torch.tensor([[4]]))
     assert problem.solution_length == int(champion.enabled.sum()) + 1
     # The start of the search is the champion itself, disabled genes and nodes included.
@@ -112,14 +117,14 @@ def test_solution_to_genomes_round_trip(tmp_path):
         assert torch.equal(getattr(back, name), getattr(champion, name)), name
     torch.testing.assert_close(back.sigma, champion.sigma, rtol=1e-6, atol=0)  # exp(log(sigma))
     fit = nonmarkov_fitness("snn", GROWN_CFG, max_steps=300)
-    problem300 = FixedTopologyProblem.from_genome(pop, GROWN_CFG, run=1, index=4, max_steps=300)
+    problem300 = FixedTopologyProblem.from_genome(pop, GROWN_CFG, run=1, index=4, task=TASK, max_steps=300)
     assert problem300.fitness(problem.initial_solution()).item() == fit(champion).item()
     # Any solution -> Genomes -> file -> Genomes -> the same solution.
     x = problem.initial_solution() + 0.3 * torch.randn(problem.solution_length, generator=torch.Generator().manual_seed(0))
     g = problem.to_genomes(x)
     path = save_genome(tmp_path / "tuned.json", g, GROWN_CFG)
     loaded = load_genome(path, GROWN_CFG)
-    again = FixedTopologyProblem.from_genome(loaded, GROWN_CFG).initial_solution()
+    again = FixedTopologyProblem.from_genome(loaded, GROWN_CFG, task=TASK).initial_solution()
     torch.testing.assert_close(again, x, rtol=1e-6, atol=1e-6)
     # Decoding clamps to the config's bounds; a batch decodes to [1, E].
     x[0], x[-1] = 100.0, 10.0
@@ -132,24 +137,30 @@ def test_solution_to_genomes_round_trip(tmp_path):
 def test_bad_input_names_the_argument():
     m = _mask(SNN_CFG)
     with pytest.raises(ValueError, match=r"mask must have shape \[N, N\] = \(5, 5\)"):
-        FixedTopologyProblem(SNN_CFG, m[:4, :4])
+        FixedTopologyProblem(SNN_CFG, m[:4, :4], task=TASK)
     no_out = m.clone()
     no_out[:, SNN_CFG.first_output] = False
     with pytest.raises(ValueError, match="mask has no connection into output node 2"):
-        FixedTopologyProblem(SNN_CFG, no_out)
+        FixedTopologyProblem(SNN_CFG, no_out, task=TASK)
     into_input = m.clone()
     into_input[3, 0] = True
     with pytest.raises(ValueError, match="mask has connections into input"):
-        FixedTopologyProblem(SNN_CFG, into_input)
+        FixedTopologyProblem(SNN_CFG, into_input, task=TASK)
     with pytest.raises(ValueError, match="mask must be bool"):
-        FixedTopologyProblem(SNN_CFG, m.float() * 0.5)
-    with pytest.raises(ValueError, match="starts rows \\[1\\] lie outside"):
-        FixedTopologyProblem(SNN_CFG, m, starts=torch.tensor([[0.0, 0, 0, 0], [3.0, 0, 0, 0]]))
+        FixedTopologyProblem(SNN_CFG, m.float() * 0.5, task=TASK)
+    # Starts are the task's states: any [S, ...] tensor of S >= 1 finite rows.
+    for bad in (torch.zeros(0, 4), torch.tensor(0.0), [[0.0, 0.0, 0.0, 0.0]]):
+        with pytest.raises(ValueError, match=r"starts must be a \[S, \.\.\.\] tensor of S >= 1 start states"):
+            FixedTopologyProblem(SNN_CFG, m, task=TASK, starts=bad)
+    with pytest.raises(ValueError, match="starts holds NaN or inf"):
+        FixedTopologyProblem(SNN_CFG, m, task=TASK, starts=torch.tensor([[0.0, 0, 0, 0], [float("nan"), 0, 0, 0]]))
     with pytest.raises(ValueError, match="max_steps"):
-        FixedTopologyProblem(SNN_CFG, m, max_steps=0)
+        FixedTopologyProblem(SNN_CFG, m, task=TASK, max_steps=0)
     with pytest.raises(ValueError, match="controller"):
-        FixedTopologyProblem(SNN_CFG, m, controller="lif")
-    problem = FixedTopologyProblem(SNN_CFG, m)
+        FixedTopologyProblem(SNN_CFG, m, task=TASK, controller="lif")
+    with pytest.raises(ValueError, match="task must be an evolution.task.Task"):
+        FixedTopologyProblem(SNN_CFG, m, task="cartpole")
+    problem = FixedTopologyProblem(SNN_CFG, m, task=TASK)
     assert problem.solution_length == int(m.sum()) + 1
     with pytest.raises(ValueError, match=r"solution must have length 8 \(7 weights, ln sigma\), got shape \(7,\)"):
         problem.to_genomes(torch.zeros(7))
@@ -171,20 +182,24 @@ def test_start_grid_has_625_distinct_states_inside_the_limits():
 
 
 class _ConstantPush:
-    """Always +10 N."""
+    """A controller (``evolution.rollout``'s protocol) of ``num_genomes`` genomes that always pushes +10 N."""
 
-    def __init__(self, rows):
-        self.rows = rows
+    def __init__(self, num_genomes):
+        self.num_genomes = num_genomes
+        self.weight = torch.zeros(num_genomes, 1, 1)  # the rollout's dtype and device
 
-    def keep(self, rows):
-        self.rows = rows.numel()
+    def initial_state(self, network):
+        return network
 
-    def act(self, state):
-        return torch.full((state.shape[0],), 10.0), torch.zeros(state.shape[0], 1)
+    def select(self, state, keep):
+        return state[keep]
+
+    def act(self, obs01, state):
+        return torch.full((obs01.shape[0], 1), 10.0), state, torch.zeros(obs01.shape[0], 1)
 
 
 def test_success_rate_is_zero_for_a_constant_push():
-    rate = policy_success_rate(_ConstantPush(2 * 625), 2)
+    rate = policy_success_rate(_ConstantPush(2))
     assert rate.tolist() == [0.0, 0.0]
 
 
@@ -194,13 +209,20 @@ def test_success_rate_matches_a_per_start_loop():
     T = 30
     rate = success_rate(pop, GROWN_CFG, starts=starts, steps=T)
     assert rate.shape == (2, 3)
-    batched = steps_from_starts(make_policy(repeat_genomes(pop, 7), GROWN_CFG), starts, 6, max_steps=200)
+    # 6 controllers x 7 starts as one rollout (C kernel, finished rows dropped), ...
+    batched = steps_from_starts(make_policy(pop, GROWN_CFG), starts, max_steps=200)
+    assert batched.shape == (6, 7)
+    # ... as the same batch through the torch network step, ...
+    torch_step = steps_from_starts(make_policy(pop, GROWN_CFG, backend="torch"), starts, max_steps=200)
+    assert torch.equal(torch_step, batched)
+    # ... and each controller alone from each start.
+    task = CartPoleTask.nonmarkov(max_steps=200)
     loop = torch.zeros(6, 7, dtype=torch.long)
     for c in range(6):
         one = pop.select_runs([c // 3]).gather(torch.tensor([[c % 3]]))
         for s in range(7):
-            policy = SpikingPolicy(one, GROWN_CFG, SpikingSpec(), 0.01, DEFAULT_PLANT)
-            loop[c, s] = closed_loop(policy, starts[s : s + 1], tau_s=0.01, max_steps=200)[0].item()
+            alone = make_controller(one, GROWN_CFG, task)
+            loop[c, s] = rollout(task, alone, starts=starts[s : s + 1]).steps.item()
     assert torch.equal(batched, loop)
     expected = (loop >= T).double().mean(-1).view(2, 3)
     assert torch.equal(rate, expected)
@@ -211,14 +233,14 @@ def test_num_actors_two_on_local_ray_matches_local_evaluation():
     ray = pytest.importorskip("ray")
     ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)  # a fresh local Ray
     try:
-        problem = FixedTopologyProblem(SNN_CFG, _mask(SNN_CFG), max_steps=200, seed=0, num_actors=2)
+        problem = FixedTopologyProblem(SNN_CFG, _mask(SNN_CFG), task=TASK, max_steps=200, seed=0, num_actors=2)
         searcher = SNES(problem, popsize=16, stdev_init=1.0, center_init=problem.initial_solution())
         log = PandasLogger(searcher)
         searcher.run(2)
         assert problem.actors is not None and len(problem.actors) == 2
         assert len(log.to_dataframe()) == 2
         pop: SolutionBatch = searcher.population
-        local = FixedTopologyProblem(SNN_CFG, _mask(SNN_CFG), max_steps=200)
+        local = FixedTopologyProblem(SNN_CFG, _mask(SNN_CFG), task=TASK, max_steps=200)
         assert torch.equal(pop.evals.flatten().double(), local.fitness(pop.values))
     finally:
         ray.shutdown()

@@ -5,10 +5,9 @@ import math
 import torch
 
 from evolution.neat import NEAT
-from tasks.cartpole import DEFAULT_PLANT
-from tasks.controllers import SpikingPolicy, SpikingSpec
+from evolution.phenotype import SpikingController
 from tasks.experiments.cartpole import controller_config, nonmarkov_fitness
-from tasks.experiments.memory_ablation import StaticMapPolicy, WipedStatePolicy, ablation_steps
+from tasks.experiments.memory_ablation import StaticMapController, WipedStateController, ablation_steps
 
 
 def _genomes():
@@ -19,21 +18,22 @@ def _genomes():
 
 
 def _forces(cls, genomes, cfg):
-    policy = cls(genomes, cfg, SpikingSpec(), 0.01, DEFAULT_PLANT)
-    a = torch.tensor([[0.1, 0.0, math.radians(2.0), 0.0]]).expand(genomes.pop_size, 4)
-    b = torch.tensor([[-0.5, 0.0, math.radians(-4.0), 0.0]]).expand(genomes.pop_size, 4)
-    first, _ = policy.act(a)
-    policy.act(b)
-    again, _ = policy.act(a)
+    policy = cls(genomes, cfg, period_s=0.01, action_max=10.0, observation_size=2)
+    state = policy.initial_state(torch.arange(genomes.pop_size))
+    a = torch.tensor([[0.5 + 0.1 / 4.8, 0.5 + math.radians(2.0) / math.radians(24.0)]]).expand(genomes.pop_size, 2)
+    b = torch.tensor([[0.5 - 0.5 / 4.8, 0.5 - math.radians(4.0) / math.radians(24.0)]]).expand(genomes.pop_size, 2)
+    first, state, _ = policy.act(a, state)
+    _, state, _ = policy.act(b, state)
+    again, _, _ = policy.act(a, state)
     return first, again
 
 
 def test_ablations_are_memoryless_and_the_evolved_policy_is_not():
     g, cfg = _genomes()
-    for cls in (WipedStatePolicy, StaticMapPolicy):
+    for cls in (WipedStateController, StaticMapController):
         first, again = _forces(cls, g, cfg)
         assert torch.equal(first, again), cls.__name__
-    first, again = _forces(SpikingPolicy, g, cfg)
+    first, again = _forces(SpikingController, g, cfg)
     assert not torch.equal(first, again)
 
 

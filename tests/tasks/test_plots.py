@@ -11,13 +11,12 @@ from matplotlib.image import imread
 from matplotlib.patches import FancyArrowPatch
 from PIL import Image
 
-from evolution import NEAT
+from evolution import NEAT, make_controller, rollout
 from evolution.population import initial_genomes
 from evolution.rng import RunRNG
 from snn_torch.plots import save_figure
-from tasks.cartpole import DEFAULT_PLANT
-from tasks.controllers import SpikingPolicy, SpikingSpec, closed_loop
-from tasks.experiments.cartpole import controller_config, nonmarkov_start
+from tasks.cartpole import CartPoleTask
+from tasks.experiments.cartpole import controller_config
 from tasks.plots import (
     EvolutionHistory,
     animate_cartpole,
@@ -45,15 +44,17 @@ def test_all_cartpole_plots_write_images(tmp_path):
     neat.run(lambda g: g.num_genes().double(), 4)
     g = neat.genomes
     one = g.gather(torch.tensor([[0]]))
-    steps, trace = closed_loop(SpikingPolicy(one, cfg, SpikingSpec(), 0.01, DEFAULT_PLANT),
-                               nonmarkov_start(1), tau_s=0.01, max_steps=100, record=True)
-    fig = plot_trajectory(trace["x"][:, 0], trace["theta"][:, 0], trace["force"][:, 0], tau_s=0.01)
+    task = CartPoleTask.nonmarkov(max_steps=100)  # tau 0.01 s, from theta = 3 degrees
+    trace = rollout(task, make_controller(one, cfg, task), record=True).trace
+    x, theta = trace["state"][:, 0, 0], trace["state"][:, 0, 2]
+    force, activity = trace["action"][:, 0, 0], trace["activity"][:, 0]
+    fig = plot_trajectory(x, theta, force, tau_s=0.01)
     assert [a.get_ylabel() for a in fig.axes] == ["cart position x (m)", "pole angle θ (deg)", "force F (N)"]
     _non_blank(save_figure(fig, tmp_path / "trajectory.png"))
-    assert math.isclose(fig.axes[2].get_xlim()[1], len(trace["x"]) * 0.01, rel_tol=0.2)
+    assert math.isclose(fig.axes[2].get_xlim()[1], len(x) * 0.01, rel_tol=0.2)
 
     _non_blank(save_figure(plot_topology(g, cfg, 0, 0, labels={0: "x", 1: "θ", 2: "F"}), tmp_path / "topology.png"))
-    _non_blank(save_figure(plot_raster(trace["activity"][:, 0], tau_s=0.01), tmp_path / "raster.png"))
+    _non_blank(save_figure(plot_raster(activity, tau_s=0.01), tmp_path / "raster.png"))
 
 
 def test_best_fitness_mean_std_plots_mean_and_band_per_controller(tmp_path):

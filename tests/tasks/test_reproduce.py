@@ -175,3 +175,20 @@ def test_tune_ga_tries_every_preset_and_threshold_and_picks_the_lowest_mean(caps
     assert seen == rows and best["mean"] == min(r["mean"] for r in rows)
     tune_main(["table2", "--controllers", "sigmoid", "--seeds", "0-1", "--generations", "2", "--survival", "0.2"])
     assert "picked:" in capsys.readouterr().out
+
+
+def test_results_do_not_depend_on_a_c_compiler(tmp_path):
+    """The same short reproduction with every C kernel, and with none (no compiler, an empty
+    cache): byte-identical runs.csv."""
+    outputs = []
+    for name, env in (("kernels", {}), ("no compiler", {"CC": str(tmp_path / "no-such-cc"), "PATH": "/nonexistent",
+                                                       "SNN_NEAT_CACHE": str(tmp_path / "empty-cache")})):
+        out = tmp_path / name.replace(" ", "_")
+        proc = subprocess.run([sys.executable, "-m", "tasks.cli", "reproduce", "table2", "--runs", "2",
+                               "--generations", "3", "--seed", "100", "--out", str(out), "--quiet", "--threads", "1"],
+                              cwd=ROOT, env={**os.environ, **env}, capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr
+        outputs.append((out / "runs.csv").read_bytes())
+        if name == "no compiler":
+            assert "torch path" in proc.stderr  # the fallback says so
+    assert outputs[0] == outputs[1]

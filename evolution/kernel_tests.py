@@ -1,0 +1,47 @@
+"""Entry points into the C kernels that only the tests use.
+
+They live in a library of their own (``evolution/csrc/test_entry_points.c``, exports declared
+in ``test_entry_points.h``), built the first time a test asks, so production builds do not
+compile them. They reach the production kernels' code through the shared headers
+(``box_muller.h``, ``gene_distance.h``), so what they check is what the kernels run.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+from torch import Tensor
+
+from evolution.breed_kernel import GeneBits, _coefficients, _genes_args, _sfx
+from evolution.config import NEATConfig
+from snn_torch._cbuild import KernelLibrary, load_library
+
+__all__ = ["library", "gene_distances"]
+
+_CSRC = Path(__file__).resolve().parent / "csrc"
+LIBRARY = ("neat_kernel_tests", _CSRC / "test_entry_points.c", _CSRC / "test_entry_points.h")
+
+
+def library() -> KernelLibrary | None:
+    """The test library (``normals_check``, ``distances_f32``/``_f64``), or None without a compiler."""
+    return load_library(*LIBRARY)
+
+
+def gene_distances(a: GeneBits, rows_a: Tensor, b: GeneBits, rows_b: Tensor, cfg: NEATConfig) -> Tensor:
+    """Distances ``[R, Ka, Kb]`` (float64) between rows ``rows_a[R, Ka]`` of ``a`` and
+    ``rows_b[R, Kb]`` of ``b`` (flat row indices), as ``evolution.distance.distance``: the
+    distance code of ``breed_kernel.assign_species``."""
+    lib = library()
+    if lib is None:
+        raise RuntimeError("the C test kernels are unavailable (no compiler, or SNN_NEAT_FUSED=0)")
+    R, Ka = rows_a.shape
+    Kb = rows_b.shape[1]
+    out = torch.empty(R, Ka, Kb, dtype=torch.float64)
+    if R * Ka * Kb == 0:
+        return out
+    ra, rb, coef = rows_a.contiguous(), rows_b.contiguous(), _coefficients(cfg)
+    getattr(lib, f"distances_{_sfx(a.weight.dtype)}")(
+        *_genes_args(a), ra.data_ptr(), Ka, *_genes_args(b), rb.data_ptr(), Kb, R, a.nn, a.words,
+        coef.data_ptr(), out.data_ptr(), torch.get_num_threads())
+    return out

@@ -1,0 +1,227 @@
+"""One rollout for every controller on every task: ``[R, P, episodes]`` as one batch.
+
+``rollout(task, controller)`` runs each of the controller's ``G = R * P`` genomes for
+``episodes`` episodes (row ``g * episodes + e``), one control step of the whole batch at a
+time: observe, normalise to [0, 1] over the task's bounds, act (network state carried across
+control steps), step the plant. A row that terminates stops counting and its plant state is
+frozen; when fewer than ``compact_below`` of the rows still in the batch are alive, the
+finished ones are dropped (plant and controller state), so they stop costing compute. No
+Python loop over genomes, episodes or neurons.
+
+``TaskFitness`` turns a task into NEAT's ``fitness_fn(genomes) -> [R, P]``: the mean over
+episodes of the return or the steps survived (``task.fitness``). Start states come from
+``task.reset`` with a generator seeded by ``seed``: every genome, in every generation, faces
+the same starts, so fitness is a pure function of the genome (resume after a kill stays exact).
+
+Every operation is row-wise and every sum runs in slot order, so a genome's fitness does not
+depend on its batch, its position, the compaction or which code path ran the network (C
+kernel, compiled, torch: tested equal).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from evolution.config import NEATConfig
+from evolution.phenotype import SigmoidSpec, SpikingSpec, make_controller
+from evolution.population import Genomes
+from evolution.task import Task, TaskError
+from snn_torch.functional.scalars import scalar
+
+__all__ = ["rollout", "RolloutResult", "TaskFitness", "evaluate", "episode_starts"]
+
+
+@dataclass
+class RolloutResult:
+    """``returns [G, E]`` (float64, sum of rewards while alive), ``steps [G, E]`` (int64, control
+    steps before the episode terminated, or all of them), ``terminated [G, E]`` (bool: the
+    episode ended by the task's ``terminated``, at control step ``steps + 1``, not by the step
+    limit) and, when recorded, ``trace``: per control step ``observation`` (before the step),
+    ``action``, ``reward``, ``activity`` (spike counts or node values) and ``state`` (tensor
+    states, after the step), each ``[T, G * E, ...]``; a finished row stays in the trace, frozen."""
+
+    returns: Tensor
+    steps: Tensor
+    terminated: Tensor
+    trace: dict[str, Tensor] | None = None
+
+    def fitness(self, kind: str) -> Tensor:
+        """``[G, E]`` float64: ``"return"`` or ``"steps"``."""
+        return self.returns if kind == "return" else self.steps.to(torch.float64)
+
+
+def _rows(t, index: Tensor):
+    if isinstance(t, Tensor):
+        return t[index]
+    return type(t)(*(x[index] for x in t))
+
+
+def _where_rows(alive: Tensor, new, old):
+    if isinstance(new, Tensor):
+        return torch.where(alive.view(-1, *([1] * (new.dim() - 1))), new, old)
+    return type(new)(*(_where_rows(alive, a, b) for a, b in zip(new, old, strict=True)))
+
+
+def _describe(task: Task, rows: Tensor, bad: Tensor, episodes: int) -> str:
+    idx = rows[torch.nonzero(bad).flatten()][:8].tolist()
+    where = ", ".join(f"(genome {r // episodes}, episode {r % episodes})" for r in idx)
+    return f"{int(bad.sum())} row(s), first: {where}"
+
+
+def _check_batch(task: Task, method: str, field: str, value, rows: int, tail: tuple[int, ...] | None = None) -> None:
+    if not isinstance(value, Tensor):
+        raise TaskError(f"task {task.name!r}: {method} must return {field} as a tensor, got {type(value).__name__}")
+    if value.shape[0] != rows or (tail is not None and tuple(value.shape[1:]) != tail):
+        want = f"[{rows}{''.join(f', {d}' for d in tail)}]" if tail is not None else f"[{rows}, ...]"
+        raise TaskError(f"task {task.name!r}: {method} returned {field} of shape {tuple(value.shape)}, expected {want}")
+
+
+def _check_finite(task: Task, method: str, field: str, value: Tensor, alive: Tensor, rows: Tensor,
+                  episodes: int) -> None:
+    finite = torch.isfinite(value) if value.dim() == 1 else torch.isfinite(value.reshape(value.shape[0], -1)).all(-1)
+    bad = alive & ~finite
+    if bool(bad.any()):
+        raise TaskError(f"task {task.name!r}: {method} returned {field} holding NaN or inf at "
+                        f"{_describe(task, rows, bad, episodes)}")
+
+
+def episode_starts(task: Task, episodes: int, seed: int, *, device: torch.device | str = "cpu",
+                   dtype: torch.dtype = torch.float32):
+    """``task.reset(episodes, generator)`` with a generator seeded by ``seed``: the start states
+    every genome is evaluated from."""
+    generator = torch.Generator(device="cpu").manual_seed(int(seed))
+    return task.reset(episodes, generator, device=device, dtype=dtype)
+
+
+def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=None, max_steps: int | None = None,
+            record: bool = False, compact_below: float = 0.5) -> RolloutResult:
+    """Run every genome of ``controller`` on ``task`` for ``episodes`` episodes, as one batch.
+
+    Args:
+        task: an ``evolution.task.Task``.
+        controller: ``SpikingController`` or ``SigmoidController`` (``evolution.phenotype``)
+            over ``G`` genomes.
+        episodes: episodes per genome; starts: their start states (``[episodes, ...]``, as
+            ``task.reset`` returns), default ``episode_starts(task, episodes, seed)``.
+        max_steps: episode length (default ``task.max_steps``).
+        record: keep a trace of every control step (no compaction; for plots).
+        compact_below: drop finished rows when fewer than this fraction of the batch is alive.
+
+    Returns:
+        ``RolloutResult`` with ``[G, episodes]`` returns and steps.
+    """
+    task.validate()
+    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+        raise ValueError(f"episodes must be a positive int, got {episodes!r}")
+    max_steps = task.max_steps if max_steps is None else max_steps
+    if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 0:
+        raise ValueError(f"max_steps must be a non-negative int, got {max_steps!r}")
+    G = controller.num_genomes
+    dtype, device = controller.weight.dtype, controller.weight.device
+    if starts is None:
+        starts = episode_starts(task, episodes, seed, device=device, dtype=dtype)
+    _check_batch(task, "reset()", "state", starts if isinstance(starts, Tensor) else starts[0], episodes)
+    B = G * episodes
+    rows = torch.arange(B, device=device)  # original row of each batch row
+    state = _rows(starts, rows % episodes)
+    alive = torch.ones(B, dtype=torch.bool, device=device)
+    if isinstance(state, Tensor):
+        _check_finite(task, "reset()", "state", state, alive, rows, episodes)
+    cstate = controller.initial_state(torch.div(rows, episodes, rounding_mode="floor"))
+    low, high = task.bounds(device=device, dtype=dtype)
+    span = high - low
+    zero, one, zero64 = scalar(0.0, low), scalar(1.0, low), scalar(0.0, low.to(torch.float64))
+    n_obs = task.observation_size
+    returns = torch.zeros(B, dtype=torch.float64, device=device)
+    steps = torch.zeros(B, dtype=torch.int64, device=device)
+    trace: dict[str, list] | None = {"observation": [], "action": [], "reward": [], "activity": [], "state": []} \
+        if record else None
+    compacted = False
+    for _ in range(max_steps):
+        obs = task.observe(state)
+        _check_batch(task, "observe()", "observation", obs, len(rows), (n_obs,))
+        obs01 = ((obs if obs.dtype == dtype else obs.to(dtype)) - low) / span
+        obs01 = torch.clamp(obs01, zero, one)
+        action, cstate, activity = controller.act(obs01, cstate)
+        new_state, reward, terminated = task.step(state, action)
+        _check_batch(task, "step()", "reward", reward, len(rows), ())
+        _check_batch(task, "step()", "terminated", terminated, len(rows), ())
+        if terminated.dtype != torch.bool:
+            raise TaskError(f"task {task.name!r}: step() must return terminated as a bool tensor, got {terminated.dtype}")
+        # One cheap test per step (a sum is finite unless some term is not, or it overflows); the
+        # exact, row by row checks run only when it fails.
+        if not bool(torch.isfinite(obs.sum() + reward.sum())):
+            _check_finite(task, "observe()", "observation", obs, alive, rows, episodes)
+            _check_finite(task, "step()", "reward", reward, alive, rows, episodes)
+        if isinstance(new_state, Tensor) and new_state.shape[0] != len(rows):
+            _check_batch(task, "step()", "state", new_state, len(rows))
+        gained = torch.where(alive, reward.to(torch.float64), zero64)
+        still = alive & ~terminated
+        if compacted:
+            returns[rows] += gained
+            steps[rows] += still
+        else:
+            returns += gained
+            steps += still
+        state = _where_rows(alive, new_state, state)  # a finished episode's plant is not simulated further
+        alive = still
+        if trace is not None:
+            for key, value in (("observation", obs), ("action", action), ("reward", reward), ("activity", activity)):
+                trace[key].append(value.detach().clone())
+            if isinstance(state, Tensor):
+                trace["state"].append(state.clone())
+            if not bool(alive.any()):
+                break
+            continue
+        n_alive = int(alive.sum())
+        if n_alive == 0:
+            break
+        if n_alive < compact_below * alive.numel():
+            keep = torch.nonzero(alive).flatten()
+            cstate = controller.select(cstate, keep)
+            rows, state, alive = rows[keep], _rows(state, keep), alive[keep]
+            compacted = True
+    out = None
+    if trace is not None:
+        out = {k: torch.stack(v) for k, v in trace.items() if v}
+    # A row survives a step unless it terminates in it, so it terminated iff it has fewer steps than the limit.
+    ended = steps < max_steps
+    return RolloutResult(returns.view(G, episodes), steps.view(G, episodes), ended.view(G, episodes), out)
+
+
+class TaskFitness:
+    """NEAT's ``fitness_fn(genomes) -> [R, P]`` for a task: the mean over ``episodes`` of each
+    genome's return or steps survived (``task.fitness``).
+
+    Args:
+        task: the task; config: the NEAT config (inputs = observations, outputs = actions).
+        kind: ``"snn"`` (NEAT-SNN) or ``"sigmoid"`` (sigmoid NEAT); spec: its ``SpikingSpec`` or
+            ``SigmoidSpec`` (default: the class defaults).
+        episodes, seed, starts, max_steps: as ``rollout``; backend: the spiking network's.
+    """
+
+    def __init__(self, task: Task, config: NEATConfig, kind: str = "snn", spec: SpikingSpec | SigmoidSpec | None = None,
+                 *, episodes: int = 1, seed: int = 0, starts=None, max_steps: int | None = None,
+                 backend: str = "auto") -> None:
+        self.task, self.config, self.kind, self.spec = task.validate(), config, kind, spec
+        self.episodes, self.seed, self.starts, self.max_steps, self.backend = episodes, seed, starts, max_steps, backend
+        if kind not in ("snn", "sigmoid"):
+            raise ValueError(f"kind must be 'snn' or 'sigmoid', got {kind!r}")
+
+    def rollout(self, genomes: Genomes, *, record: bool = False) -> RolloutResult:
+        controller = make_controller(genomes, self.config, self.task, self.spec, kind=self.kind, backend=self.backend)
+        return rollout(self.task, controller, episodes=self.episodes, seed=self.seed, starts=self.starts,
+                       max_steps=self.max_steps, record=record)
+
+    def __call__(self, genomes: Genomes) -> Tensor:
+        result = self.rollout(genomes)
+        return result.fitness(self.task.fitness).mean(-1).view(genomes.num_runs, genomes.pop_size)
+
+
+def evaluate(task: Task, genomes: Genomes, config: NEATConfig, kind: str = "snn",
+             spec: SpikingSpec | SigmoidSpec | None = None, **kwargs) -> Tensor:
+    """``TaskFitness(task, config, kind, spec, **kwargs)(genomes)``: ``[R, P]`` fitness."""
+    return TaskFitness(task, config, kind, spec, **kwargs)(genomes)

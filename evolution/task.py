@@ -1,0 +1,106 @@
+"""The task seam: a batched plant in plain torch that any controller of this toolkit can run on.
+
+A task is what EvoTorch's ``Problem`` is to EvoTorch: write one and NEAT, weight search, Ray,
+plots and checkpoints work on it. Subclass ``Task`` and give:
+
+- ``observation_low`` / ``observation_high``: bounds of each observed variable (its own units);
+  controllers normalise observations to [0, 1] over them (values beyond saturate).
+- ``action_size`` and ``action_max``: actions are ``[B, action_size]`` in
+  ``[-action_max, action_max]`` (the controllers' decoders scale to it).
+- ``max_steps``: the episode length (control steps); ``control_period_s``: the time one control
+  step covers (s); spiking controllers run ``control_period_s / dt`` substeps per step.
+- ``reset(batch, generator)``: start states ``[batch, ...]`` (a tensor, or a tuple of tensors
+  with ``batch`` rows), drawn from ``generator`` where random.
+- ``step(state, action)``: ``(next_state, reward [B], terminated [B] bool)``.
+- ``observe(state)``: ``[B, observation_size]``.
+- ``fitness``: ``"return"`` (sum of rewards) or ``"steps"`` (control steps survived).
+
+Everything is batched over rows: the rollout (``evolution.rollout``) runs every genome x every
+episode as one batch and calls each method once per control step. Write the plant as tensor
+operations over the leading batch axis; no Python loop over rows.
+
+Bad output from a task (a wrong shape, NaN or inf) is caught at the seam and raised as
+``TaskError`` naming the task, the method and field, and the (genome, episode) indices.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+
+import torch
+from torch import Tensor
+
+__all__ = ["Task", "TaskError", "FITNESS_KINDS"]
+
+FITNESS_KINDS = ("return", "steps")
+State = Tensor | tuple[Tensor, ...]
+
+
+class TaskError(ValueError):
+    """A task returned something malformed (shape, dtype, NaN or inf); the message says which
+    task, method, field and batch indices."""
+
+
+class Task(ABC):
+    """Base class of batched control tasks (see the module docstring for the contract)."""
+
+    name: str = "task"
+    observation_low: Sequence[float] = ()
+    observation_high: Sequence[float] = ()
+    action_size: int = 1
+    action_max: float = 1.0
+    max_steps: int = 1000
+    control_period_s: float = 0.02
+    fitness: str = "return"
+
+    @property
+    def observation_size(self) -> int:
+        return len(self.observation_low)
+
+    @abstractmethod
+    def reset(self, batch: int, generator: torch.Generator, *, device: torch.device | str = "cpu",
+              dtype: torch.dtype = torch.float32) -> State:
+        """Start states of ``batch`` episodes."""
+
+    @abstractmethod
+    def step(self, state: State, action: Tensor) -> tuple[State, Tensor, Tensor]:
+        """``(next_state, reward [B], terminated [B] bool)`` after one control step under ``action``."""
+
+    @abstractmethod
+    def observe(self, state: State) -> Tensor:
+        """What the controller sees, ``[B, observation_size]``."""
+
+    def validate(self) -> Task:
+        """Check the declared fields once (``TaskError`` naming the field); returns ``self``."""
+        low, high = list(self.observation_low), list(self.observation_high)
+        if not low or len(low) != len(high):
+            raise TaskError(f"task {self.name!r}: observation_low and observation_high must be non-empty and of "
+                            f"equal length, got {len(low)} and {len(high)}")
+        for k, (lo, hi) in enumerate(zip(low, high, strict=True)):
+            if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+                raise TaskError(f"task {self.name!r}: observation bounds [{lo}, {hi}] of variable {k} must be "
+                                "finite with high > low")
+        for field, value, ok in (
+            ("action_size", self.action_size, isinstance(self.action_size, int) and self.action_size >= 1),
+            ("action_max", self.action_max, isinstance(self.action_max, (int, float))
+             and math.isfinite(self.action_max) and self.action_max > 0),
+            ("max_steps", self.max_steps, isinstance(self.max_steps, int) and self.max_steps >= 1),
+            ("control_period_s", self.control_period_s, isinstance(self.control_period_s, (int, float))
+             and math.isfinite(self.control_period_s) and self.control_period_s > 0),
+            ("fitness", self.fitness, self.fitness in FITNESS_KINDS),
+        ):
+            if not ok or isinstance(value, bool):
+                raise TaskError(f"task {self.name!r}: {field} = {value!r} is not valid (action_size and max_steps: "
+                                f"positive ints; action_max, control_period_s: positive; fitness: {FITNESS_KINDS})")
+        return self
+
+    def bounds(self, *, device: torch.device | str = "cpu", dtype: torch.dtype = torch.float32) -> tuple[Tensor, Tensor]:
+        """``(low, high)`` observation bounds as ``[observation_size]`` tensors."""
+        return (torch.tensor(list(self.observation_low), dtype=dtype, device=device),
+                torch.tensor(list(self.observation_high), dtype=dtype, device=device))
+
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}(name={self.name!r}, observations={self.observation_size}, "
+                f"actions={self.action_size}, max_steps={self.max_steps}, period={self.control_period_s} s)")

@@ -1,0 +1,19 @@
+/* The C kernel of snn_torch.PopulationRecurrentIzhikevich: control steps of many recurrent
+   Izhikevich networks. Every function here is exported; snn_torch._cbuild reads these
+   prototypes to declare the ctypes signatures, so this header is the one place they live. */
+#include <stdint.h>
+
+/* `substeps` steps of dt ms (Heun, sub-step reset, Heaviside spikes, synchronous recurrence
+   with a one-step delay) of `rows` networks of n neurons under a constant external current.
+   Row r runs network net[r] (weights w[net[r]][pre][post], already masked and scaled to mV/ms
+   per spike); net NULL: row r runs network r. Nodes [0, n_src) are spike sources: their spikes
+   in substep q are src[(r * substeps + q) * n_src + i] and their v and u are held. v, u, z are
+   updated in place; counts[r][j] receives the spikes of the substeps. */
+void izh_network_steps_f32(float *v, float *u, float *z, float *counts, const float *w, const int64_t *net,
+                           const float *iext, const float *src, int64_t rows, int64_t n, int64_t n_src,
+                           int64_t substeps, float dt, float a, float b, float c, float d, float vpeak,
+                           int threads);
+void izh_network_steps_f64(double *v, double *u, double *z, double *counts, const double *w, const int64_t *net,
+                           const double *iext, const double *src, int64_t rows, int64_t n, int64_t n_src,
+                           int64_t substeps, double dt, double a, double b, double c, double d, double vpeak,
+                           int threads);

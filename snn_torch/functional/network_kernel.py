@@ -1,0 +1,122 @@
+"""The C kernel of ``PopulationRecurrentIzhikevich`` on the CPU: control steps of many networks.
+
+``recurrent_izhikevich_steps`` costs ~50 small tensor ops per substep, and for the small
+networks NEAT evolves (N ~ 8) per-op overhead, not arithmetic, sets its speed. The kernel
+(``snn_torch/csrc/recurrent_izhikevich.c``) runs all the substeps of a control step in C, 8
+networks side by side per thread, at a compile-time constant size for the usual sizes; one
+call per control step. It is generic: any number of nodes up to ``MAX_NODES``, any inputs
+(constant currents, and spike-source nodes for rate-coded inputs), rows mapped to networks by
+an index (several episodes per network, finished episodes compacted away without copying
+weights).
+
+It repeats the torch step's operations in order with no contraction, so the two agree bit for
+bit (``tests/snn_torch/test_network_kernel.py``): results do not depend on whether a C compiler
+is present. Rows are independent: a row's result does not depend on its batch or the thread
+count.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import torch
+from torch import Tensor
+
+from snn_torch._cbuild import KernelLibrary, kernels_enabled, load_library
+from snn_torch.functional.izhikevich import IzhikevichParams
+from snn_torch.functional.recurrent import RecurrentState
+
+__all__ = ["MAX_NODES", "kernel_available", "kernel_supports", "network_steps_kernel"]
+
+MAX_NODES = 64  # lane buffers live on the stack
+_CSRC = Path(__file__).resolve().parent.parent / "csrc"
+
+
+_loaded: dict[bool, KernelLibrary | None] = {}
+
+
+def _library() -> KernelLibrary | None:
+    enabled = kernels_enabled()  # SNN_NEAT_FUSED=0 can be set at any time (tests do)
+    if enabled not in _loaded:
+        lib = _loaded[enabled] = load_library("recurrent_izhikevich", _CSRC / "recurrent_izhikevich.c",
+                                              _CSRC / "recurrent_izhikevich.h")
+        if lib is None and enabled:
+            warnings.warn(TORCH_PATH_NOTE, RuntimeWarning, stacklevel=3)
+    return _loaded[enabled]
+
+
+# What the fallback costs (benchmarks/seam_speed.py --torch-path, this 2-core CPU, one thread).
+TORCH_PATH_NOTE = ("snn-neat: spiking networks run on the torch path (no C network kernel): the same results, "
+                   "but closed loops of small networks run about 10x (150 networks) to 60x (9000) slower "
+                   "on the CPU; install a C compiler (cc/gcc) for the kernel")
+
+
+def kernel_available() -> bool:
+    """True if the kernel compiled (once per machine) and ``SNN_NEAT_FUSED`` is not ``0``."""
+    return _library() is not None
+
+
+def kernel_supports(v: Tensor, p: IzhikevichParams) -> bool:
+    """Whether the kernel can run this case: CPU float32/64 ``[B, N]`` state, N <= 64, scalar
+    neuron parameters, and a built kernel."""
+    scalars = all(isinstance(x, (int, float)) for x in p)
+    return (scalars and v.device.type == "cpu" and v.dtype in (torch.float32, torch.float64) and v.dim() == 2
+            and 1 <= v.shape[-1] <= MAX_NODES and kernel_available())
+
+
+def network_steps_kernel(
+    i_ext: Tensor, state: RecurrentState, w_eff: Tensor, p: IzhikevichParams, *, dt_ms: float, substeps: int,
+    network: Tensor | None = None, source_spikes: Tensor | None = None, inplace: bool = False,
+) -> tuple[Tensor, RecurrentState]:
+    """``recurrent_izhikevich_steps`` in C (Heun, sub-step reset, Heaviside spikes).
+
+    Args:
+        i_ext: external current (mV/ms) ``[B, N]``, constant over the substeps.
+        state: ``RecurrentState`` of ``[B, N]`` tensors (not modified).
+        w_eff: effective weights ``[G, N, N]`` (pre x post, mV/ms per spike), already masked.
+        network: ``[B]`` int64, the network (index into ``w_eff``) of each row; None: row ``r``
+            runs network ``r`` (then ``G == B``).
+        source_spikes: ``[B, substeps, S]`` spikes of spike-source nodes ``0 .. S-1``, or None.
+        inplace: update ``state``'s tensors in place (they must be contiguous) instead of copies.
+
+    Returns:
+        ``(counts, new_state)``: spikes per node over the substeps ``[B, N]``, and the state.
+    """
+    if not kernel_supports(state.v, p):
+        raise ValueError("the C network kernel needs CPU float32/float64 [B, N] state, N <= 64, scalar neuron "
+                         "parameters and a working C compiler; check kernel_supports() first")
+    dtype, (B, N) = state.v.dtype, state.v.shape
+    if w_eff.dim() != 3 or w_eff.shape[1:] != (N, N) or w_eff.dtype != dtype:
+        raise ValueError(f"w_eff must be [G, {N}, {N}] of {dtype}, got {tuple(w_eff.shape)} {w_eff.dtype}")
+    if i_ext.shape != (B, N) or i_ext.dtype != dtype:
+        raise ValueError(f"i_ext must be [{B}, {N}] of {dtype}, got {tuple(i_ext.shape)} {i_ext.dtype}")
+    if network is None:
+        if w_eff.shape[0] != B:
+            raise ValueError(f"w_eff holds {w_eff.shape[0]} networks for {B} rows; pass network= to map rows")
+        net_ptr = None
+    else:
+        if network.shape != (B,) or network.dtype != torch.int64:
+            raise ValueError(f"network must be a [{B}] int64 tensor, got {tuple(network.shape)} {network.dtype}")
+        network = network.contiguous()
+        net_ptr = network.data_ptr()
+    n_src, src_ptr = 0, None
+    if source_spikes is not None:
+        if source_spikes.dim() != 3 or source_spikes.shape[:2] != (B, substeps) or source_spikes.shape[2] > N:
+            raise ValueError(f"source_spikes must be [{B}, {substeps}, S] with S <= {N}, got "
+                             f"{tuple(source_spikes.shape)}")
+        source_spikes = source_spikes.to(dtype).contiguous()
+        n_src, src_ptr = source_spikes.shape[2], source_spikes.data_ptr()
+    if inplace and all(t.is_contiguous() for t in state):
+        v, u, z = state
+    else:
+        v, u, z = (t.contiguous().clone() for t in state)  # the kernel updates these in place
+    w = w_eff.contiguous()
+    i = i_ext.contiguous()
+    counts = torch.empty_like(v)
+    lib = _library()
+    fn = lib.izh_network_steps_f32 if dtype == torch.float32 else lib.izh_network_steps_f64
+    fn(v.data_ptr(), u.data_ptr(), z.data_ptr(), counts.data_ptr(), w.data_ptr(), net_ptr, i.data_ptr(), src_ptr,
+       B, N, n_src, int(substeps), float(dt_ms), float(p.a), float(p.b), float(p.c), float(p.d), float(p.v_peak),
+       torch.get_num_threads())
+    return counts, RecurrentState(v, u, z)

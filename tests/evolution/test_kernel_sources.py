@@ -1,0 +1,48 @@
+"""The C sources of the evolution kernels against what the Python side assumes of them."""
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from evolution import breed_kernel, kernel_tests, rng, select_kernel
+from snn_torch._cbuild import parse_prototypes
+
+CSRC = Path(rng.__file__).resolve().parent / "csrc"
+
+
+def _c_array(text: str, name: str) -> list[float]:
+    body = re.search(rf"static const double {name}\[\d+\] = \{{([^}}]*)\}};", text).group(1)
+    return [float.fromhex(x) for x in body.replace("\n", " ").split(",") if x.strip()]
+
+
+def _c_define(text: str, name: str) -> float:
+    return float.fromhex(re.search(rf"#define {name} (\S+)", text).group(1))
+
+
+def test_box_muller_constants_are_the_python_ones():
+    # The torch and C normals agree bit for bit only while both use the same coefficients.
+    text = (CSRC / "box_muller.h").read_text()
+    assert _c_array(text, "BM_LOG_C") == rng._LOG_C
+    assert _c_array(text, "BM_COS_C") == rng._COS_C
+    assert _c_array(text, "BM_SIN_C") == rng._SIN_C
+    assert _c_define(text, "BM_LN2") == rng._LN2
+    assert _c_define(text, "BM_SQRT_HALF") == rng._SQRT_HALF
+    assert _c_define(text, "BM_TWO_PI") == rng.TWO_PI
+
+
+@pytest.mark.skipif(shutil.which("nm") is None, reason="no nm to list a library's symbols")
+@pytest.mark.parametrize("module", [breed_kernel, select_kernel, kernel_tests])
+def test_a_library_exports_exactly_what_its_header_declares(module):
+    # Undeclared exports would be callable with unchecked signatures; test entry points in a
+    # production library would be compiled by every build.
+    name, _, header = module.LIBRARY
+    lib = module.library() if module is kernel_tests else module._library()
+    if lib is None:
+        pytest.skip("no C compiler: kernels unavailable")
+    out = subprocess.run(["nm", "-D", "--defined-only", str(lib.path)], capture_output=True, text=True,
+                         check=True).stdout
+    exported = {line.split()[-1] for line in out.splitlines() if line.split()[1:2] == ["T"]}
+    assert exported == set(parse_prototypes(header.read_text())), name

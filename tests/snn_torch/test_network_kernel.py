@@ -1,0 +1,112 @@
+"""The C network kernel and every control-step path of PopulationRecurrentIzhikevich against the torch step."""
+
+import shutil
+
+import pytest
+import torch
+
+from snn_torch import PopulationRecurrentIzhikevich
+from snn_torch.functional.izhikevich import QIU2019, REGULAR_SPIKING
+from snn_torch.functional.network_kernel import kernel_available, network_steps_kernel
+from snn_torch.functional.recurrent import (
+    ordered_synaptic_current,
+    recurrent_init,
+    recurrent_izhikevich_steps,
+)
+
+needs_cc = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None,
+                              reason="no C compiler on this machine: the torch step is used instead")
+
+
+def _case(G, B, N, dtype, seed=0, n_src=0):
+    g = torch.Generator().manual_seed(seed)
+    mask = torch.rand(G, N, N, generator=g) < 0.4
+    w = (torch.randn(G, N, N, generator=g) * 16 * mask).to(dtype)
+    net = torch.randint(0, G, (B,), generator=g)
+    i = (5 + 60 * torch.rand(B, N, generator=g)).to(dtype)
+    src = [(torch.rand(B, 20, n_src, generator=g) < 0.3).to(dtype) if n_src else None for _ in range(12)]
+    return w, net, i, src
+
+
+@needs_cc
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("N", [3, 8, 13, 17, 30, 64])  # padded constant sizes, generic sizes, the maximum
+@pytest.mark.parametrize("n_src", [0, 2])
+def test_kernel_equals_the_torch_steps_bit_for_bit(dtype, N, n_src):
+    assert kernel_available()
+    w, net, i, src = _case(11, 29, N, dtype, seed=N, n_src=n_src)
+    ref = ker = recurrent_init((29, N), QIU2019, dtype=dtype)
+    total = 0
+    for s in src:  # 12 control steps of 20 substeps: a spike-timing difference would compound
+        c_ref, ref = recurrent_izhikevich_steps(i, ref, w[net], QIU2019, substeps=20, source_spikes=s)
+        c_ker, ker = network_steps_kernel(i, ker, w, QIU2019, dt_ms=0.5, substeps=20, network=net, source_spikes=s)
+        assert torch.equal(c_ref, c_ker)
+        total += int(c_ref.sum())
+    for a, b in zip(ref, ker, strict=True):
+        assert torch.equal(a, b)
+    assert total > 500  # the networks really spiked
+    if n_src:  # sources hold their v and u
+        assert torch.equal(ker.v[:, :n_src], torch.full_like(ker.v[:, :n_src], -65.0))
+
+
+@needs_cc
+def test_row_does_not_depend_on_batch_position_or_threads():
+    w, net, i, _ = _case(7, 40, 9, torch.float32, seed=3)
+    state = recurrent_init((40, 9), REGULAR_SPIKING)
+    counts, new = network_steps_kernel(i, state, w, REGULAR_SPIKING, dt_ms=0.5, substeps=50, network=net)
+    threads = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        for r in (0, 5, 39):  # first lane, a middle lane, the tail chunk
+            one = recurrent_init((1, 9), REGULAR_SPIKING)
+            c, s = network_steps_kernel(i[r : r + 1], one, w, REGULAR_SPIKING, dt_ms=0.5, substeps=50,
+                                        network=net[r : r + 1])
+            assert torch.equal(c[0], counts[r]) and torch.equal(s.v[0], new.v[r])
+    finally:
+        torch.set_num_threads(threads)
+
+
+def test_ordered_synaptic_current_ignores_extra_empty_slots():
+    g = torch.Generator().manual_seed(0)
+    z = (torch.rand(6, 5, generator=g) < 0.5).float()
+    w = torch.randn(6, 5, 5, generator=g)
+    wide_z = torch.cat([z, torch.zeros(6, 3)], 1)
+    wide_w = torch.zeros(6, 8, 8)
+    wide_w[:, :5, :5] = w
+    assert torch.equal(ordered_synaptic_current(wide_z, wide_w)[:, :5], ordered_synaptic_current(z, w))
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_module_paths_agree_and_kick_scales_weights(dtype):
+    w, net, i, src = _case(5, 12, 7, dtype, seed=1, n_src=2)
+    mask = w != 0
+    layers = {b: PopulationRecurrentIzhikevich(w, mask, QIU2019, i_background=4.0, synapse_kick_mv=2.0, backend=b)
+              for b in ("auto", "torch")}
+    out = {}
+    for b, layer in layers.items():
+        state, counts = None, []
+        for s in src[:4]:
+            c, state = layer.control_step(i, state, substeps=20, network=net, source_spikes=s)
+            counts.append(c)
+        out[b] = (torch.stack(counts), state)
+    assert torch.equal(out["auto"][0], out["torch"][0])
+    assert all(torch.equal(a, b) for a, b in zip(out["auto"][1], out["torch"][1], strict=True))
+    # weight * kick / dt is the current per spike
+    assert torch.equal(layers["torch"].effective_weight(), torch.where(mask, w, 0.0) * (2.0 / 0.5))
+    if shutil.which("cc") or shutil.which("gcc"):
+        assert layers["auto"].path(out["auto"][1]) == "kernel"
+
+
+def test_control_step_errors_name_the_argument():
+    w, net, i, _ = _case(5, 12, 7, torch.float32)
+    layer = PopulationRecurrentIzhikevich(w, w != 0)
+    with pytest.raises(ValueError, match="network"):
+        layer.control_step(i, substeps=2)  # 12 rows for 5 networks, no map
+    with pytest.raises(ValueError, match="i_ext"):
+        layer.control_step(i[:, :3], substeps=2, network=net)
+    with pytest.raises(ValueError, match="substeps"):
+        layer.control_step(i, substeps=0, network=net)
+    with pytest.raises(ValueError, match="network"):
+        layer.control_step(i, substeps=2, network=net.int())
+    with pytest.raises(ValueError, match="backend"):
+        PopulationRecurrentIzhikevich(w, w != 0, backend="fast")
