@@ -50,7 +50,11 @@ from snn_torch.modules.coding import (
     RateWindowState,
     SigmoidForce,
 )
-from snn_torch.modules.recurrent import PopulationRecurrentIzhikevich, PopulationRecurrentSigmoid
+from snn_torch.modules.recurrent import (
+    PopulationRecurrentIzhikevich,
+    PopulationRecurrentSigmoid,
+    ordered_matvec,
+)
 
 __all__ = ["SpikingSpec", "SigmoidSpec", "SpikingController", "SigmoidController", "SpikingState",
            "SigmoidState", "rest_rate_hz", "used_slots", "NEAT_SIGMOID_SLOPE", "ENCODERS", "SPIKING_DECODERS",
@@ -252,7 +256,7 @@ class SpikingController(_Phenotype):
             rest = torch.full((n,), rest_rate_hz(spec.neuron, spec.i_background, spec.dt_ms), dtype=torch.float64)
             rest[: self.n_in] = (0.5 * spec.input_rate_max_hz if spec.encoder == "bernoulli"
                                  else rest_rate_hz(spec.neuron, spec.i_background + 0.5 * spec.i_input_max, spec.dt_ms))
-            self.rest = rest.to(device=self.weight.device, dtype=self.weight.dtype).unsqueeze(-1)  # [n, 1]
+            self.rest = rest.to(device=self.weight.device, dtype=self.weight.dtype)  # [n]
         if spec.decoder == "sigmoid_force":
             self.decoder: nn.Module = SigmoidForce(action_max)
         elif spec.decoder == "bang_bang":
@@ -285,35 +289,30 @@ class SpikingController(_Phenotype):
         B, n, n_in = obs01.shape[0], len(self.nodes), self.n_in
         obs01 = obs01 if obs01.dtype == self.weight.dtype else obs01.to(self.weight.dtype)
         source = None
+        # forward(), not __call__: the module hooks cost more than the ops on a small batch
         if self.keys is None:
-            drive_in = self.encoder(obs01)
+            drive_in = self.encoder.forward(obs01)
             i_ext = torch.cat([drive_in, self._bias[n_in:].expand(B, n - n_in)], dim=1)
         else:
-            source = self.encoder(obs01, state.keys, state.window.steps)
+            source = self.encoder.forward(obs01, state.keys, state.window.steps)
             i_ext = self._bias.expand(B, n)
         counts, neurons = self.network.control_step(i_ext, state.neurons, substeps=self.substeps,
                                                     network=state.network, source_spikes=source, inplace=True)
-        rates, window = self.window(counts, state.window)
+        rates, window = self.window.forward(counts, state.window)
         drive = _weighted_drive(rates, state.w_out, self.rest)
-        if self.spec.decoder == "sigmoid_force":
-            action = self.decoder(drive, state.sigma.unsqueeze(-1))
-        elif self.spec.decoder == "bang_bang":
-            action = self.decoder(drive)
+        decoder = self.spec.decoder
+        if decoder == "sigmoid_force":
+            action = self.decoder.forward(drive, state.sigma.unsqueeze(-1))
+        elif decoder == "bang_bang":
+            action = self.decoder.forward(drive)
         else:
-            action = self.decoder(state.sigma.unsqueeze(-1) * drive)
+            action = self.decoder.forward(state.sigma.unsqueeze(-1) * drive)
         return action, state._replace(neurons=neurons, window=window), counts
 
 
 def _weighted_drive(rates: Tensor, w_out: Tensor, rest: Tensor | None) -> Tensor:
     """``d[b, k] = sum_j w_out[b, j, k] (r[b, j] - rest[j])`` in slot order (float64 accumulator)."""
-    r = rates.unsqueeze(-1)
-    terms = r * w_out if rest is None else (r - rest) * w_out
-    if terms.device.type == "cpu":
-        return torch.cumsum(terms, -2, dtype=torch.float64)[:, -1].to(rates.dtype)
-    acc = torch.zeros_like(terms[:, 0], dtype=torch.float64)
-    for j in range(terms.shape[1]):
-        acc = acc + terms[:, j].to(torch.float64)
-    return acc.to(rates.dtype)
+    return ordered_matvec(rates if rest is None else rates - rest, w_out)
 
 
 class SigmoidState(NamedTuple):

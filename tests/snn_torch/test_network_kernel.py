@@ -110,3 +110,17 @@ def test_control_step_errors_name_the_argument():
         layer.control_step(i, substeps=2, network=net.int())
     with pytest.raises(ValueError, match="backend"):
         PopulationRecurrentIzhikevich(w, w != 0, backend="fast")
+
+
+@pytest.mark.parametrize("B", [3, 150, 9000])  # the cumsum and the loop forms
+def test_ordered_matvec_is_a_sequential_float64_sum_in_any_batch(B):
+    from snn_torch.modules.recurrent import ordered_matvec
+
+    g = torch.Generator().manual_seed(B)
+    y, w = torch.rand(B, 9, generator=g), torch.randn(B, 9, 9, generator=g)
+    acc = torch.zeros(B, 9, dtype=torch.float64)
+    for i in range(9):
+        acc = acc + (y[:, i : i + 1] * w[:, i]).double()
+    out = ordered_matvec(y, w)
+    assert torch.equal(out, acc.float())
+    assert torch.equal(ordered_matvec(y[:2], w[:2]), out[:2])  # a row alone: the same bits
