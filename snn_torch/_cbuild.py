@@ -5,7 +5,8 @@ Each library's exported functions are declared once, in its header: ``load_libra
 prototypes there and sets every function's ``ctypes`` signature from them, and the ``.c`` file
 includes the header, so the compiler checks that the definitions match. A header function
 missing from the built library is an error at load. Headers a file includes by
-``#include "name.h"`` are read from its folder and are part of the build (and its cache key).
+``#include "name.h"`` are read from its folder (else from ``snn_torch/csrc``, the shared
+headers) and are part of the build (and its cache key).
 ``load_libraries`` builds several libraries side by side, one compiler process each.
 
 Libraries are cached under ``$SNN_NEAT_CACHE`` (default ``~/.cache/snn_neat``), keyed by the
@@ -45,6 +46,7 @@ _CTYPES = {
     "float": ctypes.c_float, "double": ctypes.c_double,
 }
 _PROTOTYPE = re.compile(r"^\s*(\w+)\s+(\w+)\s*\(([^)]*)\)\s*;", re.MULTILINE)
+SHARED_CSRC = Path(__file__).resolve().parent / "csrc"  # headers every library may include (counter_rng.h)
 _LOCAL_INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.MULTILINE)
 
 
@@ -181,7 +183,8 @@ def _library_files(source: Path, header: Path) -> dict[str, str]:
         if path.name in files:
             continue
         files[path.name] = text = path.read_text()
-        pending += [path.parent / inc for inc in _LOCAL_INCLUDE.findall(text)]
+        for inc in _LOCAL_INCLUDE.findall(text):  # the file's own folder first, then the shared headers
+            pending.append(path.parent / inc if (path.parent / inc).exists() else SHARED_CSRC / inc)
     return files
 
 

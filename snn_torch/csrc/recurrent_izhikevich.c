@@ -14,6 +14,8 @@
    its neighbours or the thread count. */
 #include "recurrent_izhikevich.h"
 
+#include "counter_rng.h"
+
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -123,7 +125,8 @@ static inline int64_t padded_size(int64_t n) {
 
 #define DEFINE_STEPS(NAME, PREFIX, T)                                                          \
 void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *iext,         \
-          const T *src, int64_t rows, int64_t n, int64_t n_src, int64_t substeps, T dt, T a,   \
+          const T *src, const double *prob, const int64_t *keys, int64_t base, int64_t rows,  \
+          int64_t n, int64_t n_src, int64_t substeps, T dt, T a,                               \
           T b, T c, T d, T vpeak, int threads) {                                               \
     const int64_t np = padded_size(n), chunks = (rows + LANES - 1) / LANES;                    \
     _Pragma("omp parallel num_threads(threads)")                                               \
@@ -157,10 +160,13 @@ void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *
             }                                                                                  \
             for (int64_t q = 0; q < substeps; ++q) {                                           \
                 for (int64_t k = 0; k < lanes && n_src; ++k) {                                 \
-                    const T *sk = src + ((r0 + k) * substeps + q) * n_src;                     \
+                    const int64_t r = r0 + k;                                                  \
                     for (int64_t i = 0; i < n_src; ++i) {                                      \
-                        zz[k * np + i] = sk[i];                                                \
-                        cnt[k * np + i] += sk[i];                                              \
+                        T s = src ? src[(r * substeps + q) * n_src + i]                       \
+                                  : (uniform01((uint64_t)keys[r], (uint64_t)(base + q * n_src + i))  \
+                                     < prob[r * n_src + i] ? (T)1 : (T)0);                   \
+                        zz[k * np + i] = s;                                                    \
+                        cnt[k * np + i] += s;                                                  \
                     }                                                                          \
                 }                                                                              \
                 LANE_WIDTHS(SIZED(PREFIX##_lanes(vv, uu, zz, W, I, cnt, L_, N_, n_src, n, dt, a, b, c, d, vpeak), \

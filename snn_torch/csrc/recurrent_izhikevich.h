@@ -7,13 +7,18 @@
    with a one-step delay) of `rows` networks of n neurons under a constant external current.
    Row r runs network net[r] (weights w[net[r]][pre][post], already masked and scaled to mV/ms
    per spike); net NULL: row r runs network r. Nodes [0, n_src) are spike sources: their spikes
-   in substep q are src[(r * substeps + q) * n_src + i] and their v and u are held. v, u, z are
-   updated in place; counts[r][j] receives the spikes of the substeps. */
+   in substep q are src[(r * substeps + q) * n_src + i] and their v and u are held; or, with src
+   NULL and prob not NULL, Bernoulli draws: source i of row r spikes in substep q when
+   uniform01(keys[r], base + q * n_src + i) < prob[r * n_src + i] (counter_rng.h, the same bits
+   as snn_torch.functional.counter_rng). v, u, z are updated in place; counts[r][j] receives
+   the spikes of the substeps. */
 void izh_network_steps_f32(float *v, float *u, float *z, float *counts, const float *w, const int64_t *net,
-                           const float *iext, const float *src, int64_t rows, int64_t n, int64_t n_src,
+                           const float *iext, const float *src, const double *prob,
+                           const int64_t *keys, int64_t base, int64_t rows, int64_t n, int64_t n_src,
                            int64_t substeps, float dt, float a, float b, float c, float d, float vpeak,
                            int threads);
 void izh_network_steps_f64(double *v, double *u, double *z, double *counts, const double *w, const int64_t *net,
-                           const double *iext, const double *src, int64_t rows, int64_t n, int64_t n_src,
+                           const double *iext, const double *src, const double *prob,
+                           const int64_t *keys, int64_t base, int64_t rows, int64_t n, int64_t n_src,
                            int64_t substeps, double dt, double a, double b, double c, double d, double vpeak,
                            int threads);

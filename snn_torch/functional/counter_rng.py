@@ -12,10 +12,12 @@ are made logical with a mask.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import torch
 from torch import Tensor
 
-__all__ = ["mix64", "uniform01", "fnv1a_keys", "s64"]
+__all__ = ["mix64", "uniform01", "fnv1a_keys", "s64", "BernoulliSources"]
 
 
 def s64(c: int) -> int:
@@ -60,3 +62,24 @@ def fnv1a_keys(flat: Tensor) -> Tensor:
     for k in range(raw.shape[1]):
         h = (h ^ raw[:, k]) * FNV_PRIME
     return mix64(h)
+
+
+class BernoulliSources(NamedTuple):
+    """Spike sources drawn from counter-based streams: source ``i`` of row ``r`` spikes in substep
+    ``q`` when ``uniform01(keys[r], base + q * S + i) < prob[r, i]``.
+
+    ``prob``: ``[B, S]`` float64 spike probability per substep; ``keys``: ``[B]`` int64 streams;
+    ``base``: the first counter of this control step. The network kernel draws these in C (the
+    same integer arithmetic, so the same spikes); ``spikes`` draws them in torch.
+    """
+
+    prob: Tensor
+    keys: Tensor
+    base: int
+
+    def spikes(self, substeps: int, dtype: torch.dtype) -> Tensor:
+        """``[B, substeps, S]`` spikes (0 or 1) in ``dtype``."""
+        B, S = self.prob.shape
+        counters = torch.arange(substeps * S, device=self.prob.device).view(1, substeps, S) + self.base
+        u = uniform01(self.keys.view(B, 1, 1), counters)
+        return (u < self.prob.unsqueeze(1)).to(dtype)

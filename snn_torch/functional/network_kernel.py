@@ -24,6 +24,7 @@ import torch
 from torch import Tensor
 
 from snn_torch._cbuild import KernelLibrary, kernels_enabled, load_library
+from snn_torch.functional.counter_rng import BernoulliSources
 from snn_torch.functional.izhikevich import IzhikevichParams
 from snn_torch.functional.recurrent import RecurrentState
 
@@ -48,7 +49,7 @@ def _library() -> KernelLibrary | None:
 
 # What the fallback costs (benchmarks/seam_speed.py --torch-path, this 2-core CPU, one thread).
 TORCH_PATH_NOTE = ("snn-neat: spiking networks run on the torch path (no C network kernel): the same results, "
-                   "but closed loops of small networks run about 10x (150 networks) to 60x (9000) slower "
+                   "but closed loops of small networks run about 16x (150 networks) to 10x (9000) slower "
                    "on the CPU; install a C compiler (cc/gcc) for the kernel")
 
 
@@ -67,7 +68,7 @@ def kernel_supports(v: Tensor, p: IzhikevichParams) -> bool:
 
 def network_steps_kernel(
     i_ext: Tensor, state: RecurrentState, w_eff: Tensor, p: IzhikevichParams, *, dt_ms: float, substeps: int,
-    network: Tensor | None = None, source_spikes: Tensor | None = None, inplace: bool = False,
+    network: Tensor | None = None, source_spikes: Tensor | BernoulliSources | None = None, inplace: bool = False,
 ) -> tuple[Tensor, RecurrentState]:
     """``recurrent_izhikevich_steps`` in C (Heun, sub-step reset, Heaviside spikes).
 
@@ -77,7 +78,8 @@ def network_steps_kernel(
         w_eff: effective weights ``[G, N, N]`` (pre x post, mV/ms per spike), already masked.
         network: ``[B]`` int64, the network (index into ``w_eff``) of each row; None: row ``r``
             runs network ``r`` (then ``G == B``).
-        source_spikes: ``[B, substeps, S]`` spikes of spike-source nodes ``0 .. S-1``, or None.
+        source_spikes: ``[B, substeps, S]`` spikes of spike-source nodes ``0 .. S-1``, or
+            ``BernoulliSources`` (drawn here, in C), or None.
         inplace: update ``state``'s tensors in place (they must be contiguous) instead of copies.
 
     Returns:
@@ -100,8 +102,17 @@ def network_steps_kernel(
             raise ValueError(f"network must be a [{B}] int64 tensor, got {tuple(network.shape)} {network.dtype}")
         network = network.contiguous()
         net_ptr = network.data_ptr()
-    n_src, src_ptr = 0, None
-    if source_spikes is not None:
+    n_src, src_ptr, prob_ptr, keys_ptr, base = 0, None, None, None, 0
+    if isinstance(source_spikes, BernoulliSources):
+        prob, keys = source_spikes.prob, source_spikes.keys
+        if prob.dim() != 2 or prob.shape[0] != B or prob.shape[1] > N or prob.dtype != torch.float64:
+            raise ValueError(f"BernoulliSources.prob must be [{B}, S] float64 with S <= {N}, got "
+                             f"{tuple(prob.shape)} {prob.dtype}")
+        if keys.shape != (B,) or keys.dtype != torch.int64:
+            raise ValueError(f"BernoulliSources.keys must be a [{B}] int64 tensor, got {tuple(keys.shape)} {keys.dtype}")
+        prob, keys = prob.contiguous(), keys.contiguous()
+        n_src, prob_ptr, keys_ptr, base = prob.shape[1], prob.data_ptr(), keys.data_ptr(), int(source_spikes.base)
+    elif source_spikes is not None:
         if source_spikes.dim() != 3 or source_spikes.shape[:2] != (B, substeps) or source_spikes.shape[2] > N:
             raise ValueError(f"source_spikes must be [{B}, {substeps}, S] with S <= {N}, got "
                              f"{tuple(source_spikes.shape)}")
@@ -117,6 +128,6 @@ def network_steps_kernel(
     lib = _library()
     fn = lib.izh_network_steps_f32 if dtype == torch.float32 else lib.izh_network_steps_f64
     fn(v.data_ptr(), u.data_ptr(), z.data_ptr(), counts.data_ptr(), w.data_ptr(), net_ptr, i.data_ptr(), src_ptr,
-       B, N, n_src, int(substeps), float(dt_ms), float(p.a), float(p.b), float(p.c), float(p.d), float(p.v_peak),
+       prob_ptr, keys_ptr, base, B, N, n_src, int(substeps), float(dt_ms), float(p.a), float(p.b), float(p.c), float(p.d), float(p.v_peak),
        torch.get_num_threads())
     return counts, RecurrentState(v, u, z)

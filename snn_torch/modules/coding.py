@@ -17,7 +17,7 @@ from typing import NamedTuple
 import torch
 from torch import Tensor, nn
 
-from snn_torch.functional.counter_rng import uniform01
+from snn_torch.functional.counter_rng import BernoulliSources
 from snn_torch.functional.decode import ordered_sum
 from snn_torch.functional.scalars import scalar
 from snn_torch.modules.recurrent import ordered_sigmoid
@@ -65,7 +65,8 @@ class BernoulliEncoder(nn.Module):
     ``(t * substeps + q) * K + k`` of the row's key, so a row's spikes depend on its key and
     its own history alone (keys: e.g. a hash of the genome, ``fnv1a_keys``).
 
-    ``forward(x [B, K], keys [B], step)`` returns spikes ``[B, substeps, K]`` (x's dtype).
+    ``forward(x [B, K], keys [B], step)`` returns the step's ``BernoulliSources``: the network's
+    C kernel draws them itself, ``.spikes(substeps, dtype)`` draws them in torch (the same bits).
     """
 
     def __init__(self, rate_max_hz: float, *, dt_ms: float, substeps: int) -> None:
@@ -79,18 +80,10 @@ class BernoulliEncoder(nn.Module):
         if self.p_max > 1.0 + 1e-12:
             raise ValueError(f"rate_max_hz * dt_ms / 1000 must be at most 1 (one spike per substep), got "
                              f"{self.p_max:g}")
-        self._counters: dict[tuple, Tensor] = {}
 
-    def forward(self, x: Tensor, keys: Tensor, step: int) -> Tensor:
-        B, K = x.shape
+    def forward(self, x: Tensor, keys: Tensor, step: int) -> BernoulliSources:
         prob = (x * scalar(self.p_max, x)).to(torch.float64)
-        ck = (K, x.device)
-        base = self._counters.get(ck)
-        if base is None:
-            base = self._counters[ck] = torch.arange(self.substeps * K, device=x.device).view(1, self.substeps, K)
-        counters = base + step * self.substeps * K
-        u = uniform01(keys.view(B, 1, 1), counters)
-        return (u < prob.unsqueeze(1)).to(x.dtype)
+        return BernoulliSources(prob, keys, step * self.substeps * x.shape[1])
 
     def extra_repr(self) -> str:
         return f"rate_max_hz={self.rate_max_hz}, dt_ms={self.dt_ms}, substeps={self.substeps}"

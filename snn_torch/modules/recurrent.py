@@ -22,6 +22,7 @@ import torch
 from torch import Tensor, nn
 
 from snn_torch.compiled import CompiledSubstep
+from snn_torch.functional.counter_rng import BernoulliSources
 from snn_torch.functional.izhikevich import (
     DEFAULT_DT_MS,
     DEFAULT_METHOD,
@@ -237,7 +238,8 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
                 ``substeps * dt_ms`` ms).
             network: ``[B]`` int64, the network of each row; None: row ``p`` is network ``p``.
             source_spikes: ``[B, substeps, S]`` spikes of spike-source nodes ``0 .. S-1`` (their
-                ``v``, ``u`` held), e.g. from ``BernoulliEncoder``; None: none.
+                ``v``, ``u`` held), or ``BernoulliSources`` (``BernoulliEncoder``'s: the kernel
+                draws them in C, the torch paths in torch, the same spikes); None: none.
             inplace: the C kernel may update ``state``'s tensors in place (a closed loop that
                 owns its state saves three copies per step); other paths never do.
 
@@ -259,6 +261,8 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
             return network_steps_kernel(i_ext, state, self.effective_weight(state.v.dtype), self.p, dt_ms=self.dt_ms,
                                         substeps=substeps, network=network, source_spikes=source_spikes,
                                         inplace=inplace)
+        if isinstance(source_spikes, BernoulliSources):  # the torch paths draw them here
+            source_spikes = source_spikes.spikes(substeps, state.v.dtype)
         w = self._row_weights(state.v.dtype, network, i_ext.shape[0])
         if path == "compiled":
             if self._compiled is None:

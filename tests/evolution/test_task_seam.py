@@ -165,3 +165,17 @@ def test_terminated_tells_a_task_end_from_the_step_limit():
     result = rollout(task, make_controller(g, cfg, task), episodes=2, starts=starts, max_steps=5)
     assert bool(result.terminated[:, 0].all()) and not bool(result.terminated[:, 1].any())
     assert bool((result.steps[:, 1] == 5).all()) and bool((result.steps[:, 0] == 0).all())
+
+
+def test_markov_cartpole_with_bernoulli_inputs_is_the_same_on_every_path(monkeypatch):
+    from tasks.experiments.cartpole import markov_config, markov_fitness
+
+    cfg = markov_config("snn", pop_size=12)
+    neat = NEAT(cfg, seeds=[2])
+    neat.run(markov_fitness("snn", cfg, max_steps=150), 2)
+    g = neat.ask()
+    kernel = markov_fitness("snn", cfg, max_steps=150)(g)
+    assert torch.equal(markov_fitness("snn", cfg, max_steps=150, backend="torch")(g), kernel)
+    monkeypatch.setenv("SNN_NEAT_FUSED", "0")
+    assert torch.equal(markov_fitness("snn", cfg, max_steps=150)(g), kernel)
+    assert int(kernel.max()) > 20

@@ -124,3 +124,24 @@ def test_ordered_matvec_is_a_sequential_float64_sum_in_any_batch(B):
     out = ordered_matvec(y, w)
     assert torch.equal(out, acc.float())
     assert torch.equal(ordered_matvec(y[:2], w[:2]), out[:2])  # a row alone: the same bits
+
+
+@needs_cc
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_bernoulli_sources_drawn_in_c_equal_the_torch_draws(dtype):
+    from snn_torch.functional.counter_rng import BernoulliSources
+
+    w, net, i, _ = _case(6, 21, 10, dtype, seed=5)
+    g = torch.Generator().manual_seed(9)
+    prob = torch.rand(21, 3, generator=g, dtype=torch.float64) * 0.5
+    keys = torch.randint(-(2**62), 2**62, (21,), generator=g)
+    ker = ref = recurrent_init((21, 10), QIU2019, dtype=dtype)
+    for step in range(5):
+        sources = BernoulliSources(prob, keys, step * 20 * 3)
+        c_ker, ker = network_steps_kernel(i, ker, w, QIU2019, dt_ms=0.5, substeps=20, network=net,
+                                          source_spikes=sources)
+        c_ref, ref = recurrent_izhikevich_steps(i, ref, w[net], QIU2019, substeps=20,
+                                                source_spikes=sources.spikes(20, dtype))
+        assert torch.equal(c_ker, c_ref)
+        assert 0 < int(c_ker[:, :3].sum()) < 21 * 20 * 3  # the sources really fired, not always
+    assert all(torch.equal(a, b) for a, b in zip(ker, ref, strict=True))
