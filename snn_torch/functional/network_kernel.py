@@ -28,7 +28,7 @@ from snn_torch.functional.counter_rng import BernoulliSources
 from snn_torch.functional.izhikevich import IzhikevichParams
 from snn_torch.functional.recurrent import RecurrentState
 
-__all__ = ["MAX_NODES", "kernel_available", "kernel_supports", "network_steps_kernel"]
+__all__ = ["MAX_NODES", "kernel_available", "kernel_supports", "network_steps_kernel", "check_network_index"]
 
 MAX_NODES = 64  # lane buffers live on the stack
 _CSRC = Path(__file__).resolve().parent.parent / "csrc"
@@ -66,9 +66,39 @@ def kernel_supports(v: Tensor, p: IzhikevichParams) -> bool:
             and 1 <= v.shape[-1] <= MAX_NODES and kernel_available())
 
 
+def check_network_index(network: Tensor, rows: int, networks: int) -> None:
+    """``network`` must be a ``[rows]`` int64 tensor of indices in ``[0, networks)`` (``ValueError``)."""
+    if not isinstance(network, Tensor) or network.shape != (rows,) or network.dtype != torch.int64:
+        shape = (tuple(network.shape), network.dtype) if isinstance(network, Tensor) else type(network).__name__
+        raise ValueError(f"network must be a [{rows}] int64 tensor, got {shape}")
+    if rows:
+        lo, hi = (int(x) for x in torch.aminmax(network))
+        if lo < 0 or hi >= networks:
+            raise ValueError(f"network indices must lie in [0, {networks}), got {lo} .. {hi}")
+
+
+def _check(i_ext: Tensor, state: RecurrentState, w_eff: Tensor, p: IzhikevichParams, network: Tensor | None) -> None:
+    if not kernel_supports(state.v, p):
+        raise ValueError("the C network kernel needs CPU float32/float64 [B, N] state, N <= 64, scalar neuron "
+                         "parameters and a working C compiler; check kernel_supports() first")
+    dtype, (B, N) = state.v.dtype, state.v.shape
+    if any(t.shape != (B, N) or t.dtype != dtype for t in state):
+        raise ValueError(f"state tensors must all be [{B}, {N}] of {dtype}")
+    if w_eff.dim() != 3 or w_eff.shape[1:] != (N, N) or w_eff.dtype != dtype:
+        raise ValueError(f"w_eff must be [G, {N}, {N}] of {dtype}, got {tuple(w_eff.shape)} {w_eff.dtype}")
+    if i_ext.shape != (B, N) or i_ext.dtype != dtype:
+        raise ValueError(f"i_ext must be [{B}, {N}] of {dtype}, got {tuple(i_ext.shape)} {i_ext.dtype}")
+    if network is None:
+        if w_eff.shape[0] != B:
+            raise ValueError(f"w_eff holds {w_eff.shape[0]} networks for {B} rows; pass network= to map rows")
+    else:
+        check_network_index(network, B, w_eff.shape[0])
+
+
 def network_steps_kernel(
     i_ext: Tensor, state: RecurrentState, w_eff: Tensor, p: IzhikevichParams, *, dt_ms: float, substeps: int,
     network: Tensor | None = None, source_spikes: Tensor | BernoulliSources | None = None, inplace: bool = False,
+    trusted: bool = False,
 ) -> tuple[Tensor, RecurrentState]:
     """``recurrent_izhikevich_steps`` in C (Heun, sub-step reset, Heaviside spikes).
 
@@ -81,27 +111,17 @@ def network_steps_kernel(
         source_spikes: ``[B, substeps, S]`` spikes of spike-source nodes ``0 .. S-1``, or
             ``BernoulliSources`` (drawn here, in C), or None.
         inplace: update ``state``'s tensors in place (they must be contiguous) instead of copies.
+        trusted: skip the checks of shapes, dtypes and network indices (a caller that made them
+            already, once per batch: ``PopulationRecurrentIzhikevich.control_step``). An index
+            outside ``w_eff`` would read outside its memory.
 
     Returns:
         ``(counts, new_state)``: spikes per node over the substeps ``[B, N]``, and the state.
     """
-    if not kernel_supports(state.v, p):
-        raise ValueError("the C network kernel needs CPU float32/float64 [B, N] state, N <= 64, scalar neuron "
-                         "parameters and a working C compiler; check kernel_supports() first")
     dtype, (B, N) = state.v.dtype, state.v.shape
-    if w_eff.dim() != 3 or w_eff.shape[1:] != (N, N) or w_eff.dtype != dtype:
-        raise ValueError(f"w_eff must be [G, {N}, {N}] of {dtype}, got {tuple(w_eff.shape)} {w_eff.dtype}")
-    if i_ext.shape != (B, N) or i_ext.dtype != dtype:
-        raise ValueError(f"i_ext must be [{B}, {N}] of {dtype}, got {tuple(i_ext.shape)} {i_ext.dtype}")
-    if network is None:
-        if w_eff.shape[0] != B:
-            raise ValueError(f"w_eff holds {w_eff.shape[0]} networks for {B} rows; pass network= to map rows")
-        net_ptr = None
-    else:
-        if network.shape != (B,) or network.dtype != torch.int64:
-            raise ValueError(f"network must be a [{B}] int64 tensor, got {tuple(network.shape)} {network.dtype}")
-        network = network.contiguous()
-        net_ptr = network.data_ptr()
+    if not trusted:
+        _check(i_ext, state, w_eff, p, network)
+    net_ptr = None if network is None else network.contiguous().data_ptr()
     n_src, src_ptr, prob_ptr, keys_ptr, base = 0, None, None, None, 0
     if isinstance(source_spikes, BernoulliSources):
         prob, keys = source_spikes.prob, source_spikes.keys

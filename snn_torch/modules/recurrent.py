@@ -33,7 +33,7 @@ from snn_torch.functional.izhikevich import (
     check_method,
     check_params,
 )
-from snn_torch.functional.network_kernel import kernel_supports, network_steps_kernel
+from snn_torch.functional.network_kernel import check_network_index, kernel_supports, network_steps_kernel
 from snn_torch.functional.recurrent import (
     RecurrentState,
     masked_weights,
@@ -183,6 +183,7 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
         self.backend = _check_backend(backend)
         self._compiled: CompiledSubstep | None = None
         self._supported: dict[tuple, bool] = {}
+        self._network_checked: Tensor | None = None  # the last network index checked for the kernel
 
     def initial_state(self, like: Tensor | tuple[int, ...]) -> RecurrentState:
         """Rest state: ``v = v0_mv``, ``u = b v``, no spikes. ``like``: a tensor (its shape, dtype
@@ -254,13 +255,18 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
         if state.v.shape != i_ext.shape:
             raise ValueError(f"state must be [{i_ext.shape[0]}, {self.num_neurons}] like i_ext, got "
                              f"{tuple(state.v.shape)}")
+        if network is not None and network is not self._network_checked:  # once per batch of rows
+            check_network_index(network, i_ext.shape[0], self.num_networks)
+            self._network_checked = network
         if self.i_background:
             i_ext = i_ext + self.i_background
         path = self.path(state)
         if path == "kernel":
-            return network_steps_kernel(i_ext, state, self.effective_weight(state.v.dtype), self.p, dt_ms=self.dt_ms,
-                                        substeps=substeps, network=network, source_spikes=source_spikes,
-                                        inplace=inplace)
+            w_eff = self.effective_weight(state.v.dtype)
+            if any(t.shape != i_ext.shape or t.dtype != i_ext.dtype for t in state):
+                raise ValueError(f"state tensors must all be [{i_ext.shape[0]}, {self.num_neurons}] of {i_ext.dtype}")
+            return network_steps_kernel(i_ext, state, w_eff, self.p, dt_ms=self.dt_ms, substeps=substeps,
+                                        network=network, source_spikes=source_spikes, inplace=inplace, trusted=True)
         if isinstance(source_spikes, BernoulliSources):  # the torch paths draw them here
             source_spikes = source_spikes.spikes(substeps, state.v.dtype)
         w = self._row_weights(state.v.dtype, network, i_ext.shape[0])

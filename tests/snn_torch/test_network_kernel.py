@@ -110,6 +110,13 @@ def test_control_step_errors_name_the_argument():
         layer.control_step(i, substeps=2, network=net.int())
     with pytest.raises(ValueError, match="backend"):
         PopulationRecurrentIzhikevich(w, w != 0, backend="fast")
+    for bad in (net + 5, net - 1):  # an index outside the 5 networks: refused, never read out of bounds
+        with pytest.raises(ValueError, match=r"network indices must lie in \[0, 5\)"):
+            layer.control_step(i, substeps=2, network=bad)
+        if kernel_available():
+            with pytest.raises(ValueError, match="network indices"):
+                network_steps_kernel(i, layer.initial_state(i), layer.effective_weight(), layer.p, dt_ms=0.5,
+                                     substeps=2, network=bad)
 
 
 @pytest.mark.parametrize("B", [3, 150, 9000])  # the cumsum and the loop forms
