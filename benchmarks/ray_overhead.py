@@ -33,6 +33,7 @@ import time
 import torch
 
 from evolution.weight_search import FixedTopologyProblem
+from tasks.cartpole import CartPoleTask
 from tasks.experiments.cartpole import controller_config
 from tasks.generalization import start_grid
 
@@ -47,7 +48,7 @@ def _problem(starts: int, max_steps: int) -> FixedTopologyProblem:
     mask[out, out + 3] = mask[out + 3, out] = True  # a recurrent loop through the output
     grid = start_grid()
     pick = torch.randperm(grid.shape[0], generator=torch.Generator().manual_seed(0))[:starts]
-    return FixedTopologyProblem(cfg, mask, starts=grid[pick], max_steps=max_steps)
+    return FixedTopologyProblem(cfg, mask, task=CartPoleTask.nonmarkov(), starts=grid[pick], max_steps=max_steps)
 
 
 def _median_time(fn, repeats: int) -> float:

@@ -179,3 +179,16 @@ def test_markov_cartpole_with_bernoulli_inputs_is_the_same_on_every_path(monkeyp
     monkeypatch.setenv("SNN_NEAT_FUSED", "0")
     assert torch.equal(markov_fitness("snn", cfg, max_steps=150)(g), kernel)
     assert int(kernel.max()) > 20
+
+
+def test_evolution_imports_nothing_from_tasks():
+    import subprocess
+    import sys
+
+    code = ("import pkgutil, importlib, sys, evolution\n"
+            "for m in pkgutil.iter_modules(evolution.__path__):\n"
+            "    importlib.import_module('evolution.' + m.name)\n"
+            "print(sorted(k for k in sys.modules if k == 'tasks' or k.startswith('tasks.')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
