@@ -285,7 +285,8 @@ class SpikingController(_Phenotype):
 
     def act(self, obs01: Tensor, state: SpikingState) -> tuple[Tensor, SpikingState, Tensor]:
         """One control step from normalised observations ``[B, num_inputs]``: ``(action [B, K],
-        state, spike counts [B, n])``."""
+        state, spike counts [B, n])``. ``state`` is consumed: its tensors may be updated in place
+        (the C kernel and the rate window write into them); ``select`` or a clone keeps a copy."""
         B, n, n_in = obs01.shape[0], len(self.nodes), self.n_in
         obs01 = obs01 if obs01.dtype == self.weight.dtype else obs01.to(self.weight.dtype)
         source = None

@@ -3,7 +3,9 @@
 A controller is ``encoder -> network -> decoder``. Encoders take observations already
 normalised to [0, 1] (``snn_torch.functional.normalize``) and give input currents or spikes;
 decoders take spike counts or node values and give actions. All work on a batch of rows
-``[B, ...]`` (one row per episode) and are pure: state, where there is any, goes in and out.
+``[B, ...]`` (one row per episode); state, where there is any, goes in and out (``RateWindow``
+writes the new counts into the history it is given: a closed loop owns its state; clone it to
+keep an old one).
 
 Every sum runs in slot order (``ordered_sum``), so a row's action never depends on the batch
 it is in or on how many node slots the batch simulates.
