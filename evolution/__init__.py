@@ -16,6 +16,7 @@ from evolution.phenotype import (
     SpikingSpec,
     make_controller,
     rest_rate_hz,
+    spiking_config,
 )
 from evolution.population import Genomes, check_invariants
 from evolution.reporters import BaseReporter, Checkpointer, StatisticsReporter, StdOutReporter, TqdmReporter
@@ -27,5 +28,5 @@ __all__ = [
     "BaseReporter", "Checkpointer", "StatisticsReporter", "StdOutReporter", "TqdmReporter",
     "check_invariants", "load_genome", "save_genome", "to_networkx",
     "Task", "TaskError", "TaskFitness", "RolloutResult", "rollout", "evaluate", "episode_starts",
-    "SpikingSpec", "SigmoidSpec", "SpikingController", "SigmoidController", "make_controller", "rest_rate_hz",
+    "SpikingSpec", "SigmoidSpec", "SpikingController", "SigmoidController", "make_controller", "rest_rate_hz", "spiking_config",
 ]

@@ -58,7 +58,7 @@ from snn_torch.modules.recurrent import (
 
 __all__ = ["SpikingSpec", "SigmoidSpec", "SpikingController", "SigmoidController", "SpikingState",
            "SigmoidState", "rest_rate_hz", "used_slots", "NEAT_SIGMOID_SLOPE", "ENCODERS", "SPIKING_DECODERS",
-           "SIGMOID_DECODERS", "make_controller"]
+           "SIGMOID_DECODERS", "make_controller", "spiking_config", "SPIKING_SIGMA"]
 
 NEAT_SIGMOID_SLOPE = 4.9  # [NEAT02]
 ENCODERS = ("current", "bernoulli")
@@ -167,6 +167,20 @@ def rest_rate_hz(neuron: IzhikevichParams, current: float, dt_ms: float) -> floa
     z, _ = izhikevich_run(torch.full((steps, 1), float(current), dtype=torch.float64),
                           IzhikevichState(v, u), neuron, dt_ms=dt_ms)
     return float(z[steps // 3:].sum()) / 2.0
+
+
+# The decoder gain sigma scales sum_i w_i r_i (Hz): 0.005 keeps a sigmoid force off saturation at
+# ~100 Hz; its mutation, bounds and weight in the distance to match ([Qiu19] evolves sigma).
+SPIKING_SIGMA = dict(sigma_init_mean=0.005, sigma_mutate_power=0.00125, sigma_min_value=1e-5, sigma_max_value=1.0,
+                     compatibility_sigma_coefficient=100.0)
+
+
+def spiking_config(num_inputs: int, num_outputs: int = 1, **overrides) -> NEATConfig:
+    """A ``NEATConfig`` for NEAT-SNN on a task with ``num_inputs`` observations and ``num_outputs``
+    actions: no bias inputs, and the decoder gain's settings (``SPIKING_SIGMA``); ``overrides``
+    set any other field."""
+    return NEATConfig(**{"num_inputs": num_inputs, "num_outputs": num_outputs, "num_bias": 0, **SPIKING_SIGMA,
+                         **overrides})
 
 
 def used_slots(genomes: Genomes) -> Tensor:

@@ -14,7 +14,7 @@ import torch
 from torch import Tensor
 
 from evolution.config import NEATConfig
-from evolution.phenotype import SigmoidSpec, SpikingSpec
+from evolution.phenotype import SPIKING_SIGMA, SigmoidSpec, SpikingSpec
 from evolution.population import Genomes
 from evolution.rollout import TaskFitness
 from tasks.cartpole import DEFAULT_PLANT, THETA0_RAD, CartPoleParams, CartPoleTask
@@ -120,10 +120,7 @@ def ga_overrides(ga: str) -> dict:
 def controller_config(controller: str, *, self_loops: bool = False, ga: str = "neat-c++", **overrides) -> NEATConfig:
     """The NEAT config of a controller for the non-Markov task, under GA preset ``ga``."""
     if controller == "snn":
-        base = dict(num_inputs=2, num_outputs=1, num_bias=0, max_hidden=16,
-                    # sigma scales sum_i w_i r_i (Hz): 0.005 keeps F off saturation at ~100 Hz.
-                    sigma_init_mean=0.005, sigma_mutate_power=0.00125, sigma_min_value=1e-5,
-                    sigma_max_value=1.0, compatibility_sigma_coefficient=100.0)
+        base = dict(num_inputs=2, num_outputs=1, num_bias=0, max_hidden=16, **SPIKING_SIGMA)
     elif controller == "sigmoid":
         base = dict(num_inputs=2, num_outputs=1, num_bias=1, max_hidden=16, sigma_mutate_rate=0.0,
                     compatibility_sigma_coefficient=0.0)
