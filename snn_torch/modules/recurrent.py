@@ -80,6 +80,7 @@ class _PopulationNetwork(nn.Module):
         self.scale = float(scale)
         self._w_eff: tuple[tuple, Tensor] | None = None
         self._gathered: tuple[Tensor, Tensor, Tensor] | None = None
+        self._network_checked: Tensor | None = None  # the last row -> network index checked
 
     @property
     def num_networks(self) -> int:
@@ -183,7 +184,6 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
         self.backend = _check_backend(backend)
         self._compiled: CompiledSubstep | None = None
         self._supported: dict[tuple, bool] = {}
-        self._network_checked: Tensor | None = None  # the last network index checked for the kernel
 
     def initial_state(self, like: Tensor | tuple[int, ...]) -> RecurrentState:
         """Rest state: ``v = v0_mv``, ``u = b v``, no spikes. ``like``: a tensor (its shape, dtype
@@ -348,6 +348,9 @@ class PopulationRecurrentSigmoid(_PopulationNetwork):
         if values is None:
             values = self.initial_state(inputs.shape[0])
         self._check_rows(values, "values", network)
+        if network is not None and network is not self._network_checked:  # once per batch of rows
+            check_network_index(network, values.shape[0], self.num_networks)
+            self._network_checked = network
         w = self._row_weights(values.dtype, network, values.shape[0])
         y = values
         for _ in range(updates):

@@ -152,3 +152,17 @@ def test_bernoulli_sources_drawn_in_c_equal_the_torch_draws(dtype):
         assert torch.equal(c_ker, c_ref)
         assert 0 < int(c_ker[:, :3].sum()) < 21 * 20 * 3  # the sources really fired, not always
     assert all(torch.equal(a, b) for a, b in zip(ker, ref, strict=True))
+
+
+def test_sigmoid_twin_refuses_bad_network_indices_and_matches_a_row_alone():
+    from snn_torch.modules.recurrent import PopulationRecurrentSigmoid
+
+    w, net, _, _ = _case(5, 12, 7, torch.float32)
+    layer = PopulationRecurrentSigmoid(w, w != 0, num_clamped=2, num_bias=1)
+    x = torch.rand(12, 2, generator=torch.Generator().manual_seed(1))
+    with pytest.raises(ValueError, match="network indices"):
+        layer.control_step(x, network=net + 5)
+    y = layer.control_step(x, updates=3, network=net)
+    one = layer.control_step(x[4:5], updates=3, network=net[4:5])
+    assert torch.equal(one[0], y[4])
+    assert torch.equal(y[:, :2], x) and bool((y[:, 2] == 1).all())  # inputs and bias clamped
