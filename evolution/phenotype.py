@@ -31,6 +31,7 @@ from torch import Tensor, nn
 from evolution.config import NEATConfig
 from evolution.population import Genomes
 from snn_torch.functional.counter_rng import fnv1a_keys
+from snn_torch.functional.decode import ordered_matvec
 from snn_torch.functional.izhikevich import (
     QIU2019,
     IzhikevichParams,
@@ -50,11 +51,7 @@ from snn_torch.modules.coding import (
     RateWindowState,
     SigmoidForce,
 )
-from snn_torch.modules.recurrent import (
-    PopulationRecurrentIzhikevich,
-    PopulationRecurrentSigmoid,
-    ordered_matvec,
-)
+from snn_torch.modules.recurrent import PopulationRecurrentIzhikevich, PopulationRecurrentSigmoid
 
 __all__ = ["SpikingSpec", "SigmoidSpec", "SpikingController", "SigmoidController", "SpikingState",
            "SigmoidState", "rest_rate_hz", "used_slots", "NEAT_SIGMOID_SLOPE", "ENCODERS", "SPIKING_DECODERS",

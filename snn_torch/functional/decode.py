@@ -7,7 +7,12 @@ import math
 import torch
 from torch import Tensor
 
-__all__ = ["firing_rate", "weighted_rate_force", "bang_bang_force", "ordered_sum"]
+from snn_torch.functional.scalars import scalar
+
+__all__ = ["firing_rate", "weighted_rate_force", "bang_bang_force", "ordered_sum", "ordered_matvec",
+           "ordered_sigmoid"]
+
+_CUMSUM_MAX = 32768  # elements up to which one cumsum beats a loop over the slots (measured, this CPU)
 
 
 def firing_rate(spikes: Tensor, *, dt_ms: float, dim: int = 0) -> Tensor:
@@ -32,13 +37,25 @@ def ordered_sum(x: Tensor, dim: int = -1) -> Tensor:
     zeros anywhere change nothing. On the CPU this is ``cumsum`` (a sequential loop that
     accumulates float32 in double); elsewhere an explicit loop over the slots.
     """
-    if x.device.type == "cpu" and x.numel() <= 32768:  # beyond, cumsum's ~100 ns an element loses to the loop
+    if x.device.type == "cpu" and x.numel() <= _CUMSUM_MAX:  # beyond, cumsum's ~100 ns an element loses
         return torch.cumsum(x, dim, dtype=torch.float64).select(dim, -1).to(x.dtype) if x.shape[dim] else \
             x.sum(dim)
     acc = torch.zeros_like(x.select(dim, 0), dtype=torch.float64)
     for k in range(x.shape[dim]):
         acc = acc + x.select(dim, k).to(torch.float64)
     return acc.to(x.dtype)
+
+
+def ordered_matvec(y: Tensor, w: Tensor) -> Tensor:
+    """``x[b, j] = sum_i y[b, i] w[b, i, j]``, each product rounded to the dtype, then ``ordered_sum``
+    over ``i``: the same bits for a row in any batch and with any number of zero slots."""
+    return ordered_sum(y.unsqueeze(-1) * w, dim=1)
+
+
+def ordered_sigmoid(x: Tensor) -> Tensor:
+    """``1 / (1 + exp(-x))``: torch.sigmoid's vectorised and scalar-tail paths differ in the last
+    bit, so a row's result would depend on its position in the batch; this form does not."""
+    return torch.reciprocal(scalar(1.0, x) + torch.exp(-x))
 
 
 def weighted_rate_force(
@@ -56,7 +73,7 @@ def weighted_rate_force(
         Force in ``(-f_max, f_max)``, shape ``rates.shape[:-1]``.
     """
     drive = ordered_sum(rates * weights, dim=-1)  # slot order: independent of batch and slot count
-    return f_max * (2.0 * (1.0 / (1.0 + torch.exp(-(sigma * drive)))) - 1.0)
+    return f_max * (2.0 * ordered_sigmoid(sigma * drive) - 1.0)
 
 
 def bang_bang_force(drive: Tensor, *, threshold: float | Tensor, f_max: float = 10.0) -> Tensor:

@@ -7,7 +7,7 @@ decoders take spike counts or node values and give actions. All work on a batch 
 writes the new counts into the history it is given: a closed loop owns its state; clone it to
 keep an old one).
 
-Every sum runs in slot order (``ordered_sum``), so a row's action never depends on the batch
+Every sum runs in slot order (``snn_torch.functional.decode.ordered_sum``), so a row's action never depends on the batch
 it is in or on how many node slots the batch simulates.
 """
 
@@ -20,12 +20,11 @@ import torch
 from torch import Tensor, nn
 
 from snn_torch.functional.counter_rng import BernoulliSources
-from snn_torch.functional.decode import ordered_sum
+from snn_torch.functional.decode import ordered_sigmoid
 from snn_torch.functional.scalars import scalar
-from snn_torch.modules.recurrent import ordered_sigmoid
 
 __all__ = ["CurrentEncoder", "BernoulliEncoder", "RateWindow", "RateWindowState", "SigmoidForce", "BangBang",
-           "LinearReadout", "weighted_drive"]
+           "LinearReadout"]
 
 
 def _finite(name: str, value: float, *, positive: bool = False, nonnegative: bool = False) -> float:
@@ -125,13 +124,6 @@ class RateWindow(nn.Module):
 
     def extra_repr(self) -> str:
         return f"window={self.window}, period_s={self.period_s}"
-
-
-def weighted_drive(rates: Tensor, weights: Tensor, rest: Tensor | None = None) -> Tensor:
-    """``sum_j w_j (r_j - rest_j)`` over the last axis, in slot order with a float64 accumulator
-    (rows ``[B, N]``; ``rest`` broadcasts, None: 0). Returns ``[B]`` in ``rates``' dtype."""
-    terms = rates * weights if rest is None else (rates - rest) * weights
-    return ordered_sum(terms, dim=-1)
 
 
 class SigmoidForce(nn.Module):

@@ -23,6 +23,7 @@ from torch import Tensor, nn
 
 from snn_torch.compiled import CompiledSubstep
 from snn_torch.functional.counter_rng import BernoulliSources
+from snn_torch.functional.decode import ordered_matvec, ordered_sigmoid
 from snn_torch.functional.izhikevich import (
     DEFAULT_DT_MS,
     DEFAULT_METHOD,
@@ -44,8 +45,7 @@ from snn_torch.functional.recurrent import (
 from snn_torch.functional.scalars import scalar
 from snn_torch.functional.threshold import SpikeFn, heaviside
 
-__all__ = ["PopulationRecurrentIzhikevich", "PopulationRecurrentSigmoid", "BACKENDS", "ordered_sigmoid",
-           "ordered_matvec"]
+__all__ = ["PopulationRecurrentIzhikevich", "PopulationRecurrentSigmoid", "BACKENDS"]
 
 BACKENDS = ("auto", "kernel", "compiled", "torch")
 
@@ -285,29 +285,6 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
     def extra_repr(self) -> str:
         return (f"P={self.num_networks}, N={self.num_neurons}, p={tuple(self.p)}, dt_ms={self.dt_ms}, "
                 f"i_background={self.i_background}, synapse_kick_mv={self.synapse_kick_mv}, backend={self.backend!r}")
-
-
-_CUMSUM_MAX = 32768  # elements up to which one cumsum beats a loop over the slots (measured, this CPU)
-
-
-def ordered_matvec(y: Tensor, w: Tensor) -> Tensor:
-    """``x[b, j] = sum_i y[b, i] w[b, i, j]``, each product rounded to the dtype, summed over ``i``
-    ascending in float64 and rounded once: the same bits for a row in any batch and with any
-    number of zero slots (on the CPU one ``cumsum``, a sequential loop; elsewhere a loop)."""
-    terms = y.unsqueeze(-1) * w
-    # cumsum is one op but ~100 ns an element on the CPU; the loop is n ops: the same sums (tested)
-    if terms.device.type == "cpu" and terms.numel() <= _CUMSUM_MAX:
-        return torch.cumsum(terms, 1, dtype=torch.float64).select(1, -1).to(y.dtype)
-    acc = torch.zeros_like(terms[:, 0], dtype=torch.float64)
-    for i in range(terms.shape[1]):
-        acc = acc + terms[:, i].to(torch.float64)
-    return acc.to(y.dtype)
-
-
-def ordered_sigmoid(x: Tensor) -> Tensor:
-    """``1 / (1 + exp(-x))``: torch.sigmoid's vectorised and scalar-tail paths differ in the last
-    bit, so a row's result would depend on its position in the batch; this form does not."""
-    return torch.reciprocal(scalar(1.0, x) + torch.exp(-x))
 
 
 class PopulationRecurrentSigmoid(_PopulationNetwork):

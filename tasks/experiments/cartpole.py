@@ -19,7 +19,7 @@ from evolution.population import Genomes
 from evolution.rollout import TaskFitness
 from tasks.cartpole import DEFAULT_PLANT, THETA0_RAD, CartPoleParams, CartPoleTask
 
-__all__ = ["PAPER_SPECS", "paper_task", "paper_spec", "CONTROLLERS", "GA_PRESETS", "GA_CHOICES", "TUNED_GA", "ga_overrides", "ga_choice", "describe_ga", "NONMARKOV", "MARKOV", "controller_config", "nonmarkov_start", "nonmarkov_fitness",
+__all__ = ["PAPER_SPECS", "paper_task", "paper_spec", "paper_fitness", "CONTROLLERS", "GA_PRESETS", "GA_CHOICES", "TUNED_GA", "ga_overrides", "ga_choice", "describe_ga", "NONMARKOV", "MARKOV", "controller_config", "nonmarkov_start", "nonmarkov_fitness",
            "markov_config", "markov_fitness", "markov_start"]
 
 CONTROLLERS = ("snn", "sigmoid")
@@ -141,9 +141,15 @@ def nonmarkov_fitness(controller: str, config: NEATConfig, *, spec: SpikingSpec 
                       plant: CartPoleParams = DEFAULT_PLANT, max_steps: int | None = None,
                       backend: str = "auto") -> Callable[[Genomes], Tensor]:
     """``fitness_fn(genomes) -> [R, P]``: control steps balanced on Table II's task (the paper's fitness)."""
-    spec = paper_spec("table2", controller) if spec is None else spec
-    return TaskFitness(paper_task("table2", plant=plant, max_steps=max_steps), config, controller, spec,
-                       backend=backend)
+    return paper_fitness("table2", controller, config, spec=spec, plant=plant, max_steps=max_steps, backend=backend)
+
+
+def paper_fitness(table: str, controller: str, config: NEATConfig, *, spec: SpikingSpec | SigmoidSpec | None = None,
+                  plant: CartPoleParams = DEFAULT_PLANT, max_steps: int | None = None,
+                  backend: str = "auto") -> TaskFitness:
+    """``TaskFitness`` of ``controller`` on ``table``'s task with the paper's coding (``PAPER_SPECS``)."""
+    spec = paper_spec(table, controller) if spec is None else spec
+    return TaskFitness(paper_task(table, plant=plant, max_steps=max_steps), config, controller, spec, backend=backend)
 
 
 def markov_config(controller: str, *, self_loops: bool = False, ga: str = "neat-c++", **overrides) -> NEATConfig:
@@ -169,6 +175,4 @@ def markov_fitness(controller: str, config: NEATConfig, *, spec: SpikingSpec | S
                    plant: CartPoleParams = DEFAULT_PLANT, max_steps: int | None = None,
                    backend: str = "auto") -> Callable[[Genomes], Tensor]:
     """``fitness_fn(genomes) -> [R, P]``: control steps balanced on the Markov task (Table I)."""
-    spec = paper_spec("table1", controller) if spec is None else spec
-    return TaskFitness(paper_task("table1", plant=plant, max_steps=max_steps), config, controller, spec,
-                       backend=backend)
+    return paper_fitness("table1", controller, config, spec=spec, plant=plant, max_steps=max_steps, backend=backend)

@@ -121,7 +121,7 @@ def test_control_step_errors_name_the_argument():
 
 @pytest.mark.parametrize("B", [3, 150, 9000])  # the cumsum and the loop forms
 def test_ordered_matvec_is_a_sequential_float64_sum_in_any_batch(B):
-    from snn_torch.modules.recurrent import ordered_matvec
+    from snn_torch.functional.decode import ordered_matvec
 
     g = torch.Generator().manual_seed(B)
     y, w = torch.rand(B, 9, generator=g), torch.randn(B, 9, 9, generator=g)
