@@ -11,6 +11,7 @@ Parents are discarded.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import torch
@@ -30,7 +31,7 @@ from evolution.population import Genomes
 from evolution.rng import RunRNG
 from evolution.speciate import SpeciesState
 
-__all__ = ["ReproductionInfo", "allocate_offspring", "reproduce", "select_parents", "update_stagnation"]
+__all__ = ["ReproductionInfo", "allocate_offspring", "share_scale", "reproduce", "select_parents", "update_stagnation"]
 
 
 @dataclass
@@ -67,6 +68,20 @@ def update_stagnation(fitness: Tensor, species: Tensor, sp: SpeciesState, cfg: N
     return new, survivors, sf
 
 
+def share_scale(fitness: Tensor) -> Tensor:
+    """``[R, 1]`` float64: the factor ``allocate_offspring``'s sums take each run's fitness by.
+
+    1, or where sums of ``P`` values and differences of two could overflow (``|f| > max / 4P``,
+    about 3e305 at P = 150), the power of two ``2**-e`` with ``2**e > 4P``: a power of two scales
+    exactly, so the quotas are those of unbounded exponents, and every smaller fitness is
+    shared bit for bit as before. (``evolution/csrc/select.c`` has the same ``share_scale``.)"""
+    P = fitness.shape[1]
+    e = math.frexp(4.0 * P)[1]
+    top = fitness.to(torch.float64).abs().amax(1, keepdim=True)
+    big = top > torch.finfo(torch.float64).max / (4.0 * P)
+    return torch.where(big, 2.0 ** -e, 1.0).to(torch.float64)
+
+
 def allocate_offspring(fitness: Tensor, species: Tensor, survivors: Tensor, pop_size: int) -> Tensor:
     """Offspring per species slot, ``[R, S]`` long, summing to ``pop_size`` in every run
     that has a survivor. Explicit fitness sharing: a species' share is the sum of its
@@ -74,10 +89,11 @@ def allocate_offspring(fitness: Tensor, species: Tensor, survivors: Tensor, pop_
     run's minimum; all-equal shares split evenly. Rounded by largest remainder."""
     R, S = survivors.shape
     dt = torch.float64
+    f = fitness.to(dt) * share_scale(fitness)
     size = torch.zeros(R, S, dtype=dt, device=fitness.device).scatter_add_(1, species, torch.ones_like(fitness, dtype=dt))
-    total_f = torch.zeros(R, S, dtype=dt, device=fitness.device).scatter_add_(1, species, fitness.to(dt))
+    total_f = torch.zeros(R, S, dtype=dt, device=fitness.device).scatter_add_(1, species, f)
     # [NEAT02] shares raw fitness; shift only when a run has negative fitness values.
-    f_min = fitness.to(dt).amin(1, keepdim=True).clamp_max(0.0)
+    f_min = f.amin(1, keepdim=True).clamp_max(0.0)
     share = torch.where(survivors, total_f / size.clamp_min(1) - f_min, 0.0).clamp_min(0.0)
     total = share.sum(1, keepdim=True)
     share = torch.where(total > 0, share, survivors.to(dt))

@@ -67,6 +67,10 @@ def select_parents(fitness: Tensor, species: Tensor, survivors: Tensor, counts: 
     lib = _require()
     R, P = fitness.shape
     S = survivors.shape[1]
+    total = counts.sum(1)
+    if bool((counts < 0).any() | ((total != P) & (total != 0)).any()):  # the C indexes by them: refuse, not crash
+        raise ValueError(f"select_parents: offspring counts must be >= 0 and sum to {P} (or 0) per run, "
+                         f"got sums {total.tolist()}")
     base = rng.take(SELECTION_DRAWS * P)
     first, second = torch.empty(R, P, dtype=torch.int64), torch.empty(R, P, dtype=torch.int64)
     do_cross, elite = torch.empty(R, P, dtype=torch.uint8), torch.empty(R, P, dtype=torch.uint8)

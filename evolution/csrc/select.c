@@ -3,6 +3,7 @@
    arithmetic, so the results are the same bit for bit. */
 #include "select.h"
 
+#include <float.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -142,6 +143,18 @@ void choose_representatives_##SFX(const int64_t *species, const uint8_t *conn, c
 DEFINE_REPS(float, f32)
 DEFINE_REPS(double, f64)
 
+/* The factor allocate_offspring's sums take the run's fitness values by: 1, or where sums of P
+   values and differences of two could overflow (|f| > DBL_MAX / 4P), the power of two 2^-e with
+   2^e > 4P. A power of two scales exactly, so the quotas are the same as with unbounded
+   exponents; 1 leaves every smaller fitness bit for bit as before. */
+static double share_scale(const double *f, int64_t P) {
+    double top = 0.0;
+    for (int64_t p = 0; p < P; ++p) top = fabs(f[p]) > top ? fabs(f[p]) : top;
+    int e;
+    frexp(4.0 * (double)P, &e);
+    return top > DBL_MAX / (4.0 * (double)P) ? ldexp(1.0, -e) : 1.0;
+}
+
 /* reproduce's update_stagnation then allocate_offspring, run by run, with the reference's
    arithmetic: species' best fitness, stagnation, the species_elitism best species protected
    (stable descending order), then offspring by explicit fitness sharing and largest remainder.
@@ -161,13 +174,15 @@ void species_offspring(const double *fitness, const int64_t *species, const uint
         double *sf = buf, *size = buf + S, *total_f = buf + 2 * S, *share = buf + 3 * S, *frac = buf + 4 * S;
         uint8_t *prot = (uint8_t *)(buf + 5 * S); /* protected from stagnation */
         double f_min = INFINITY;
+        const double scale = share_scale(f, P);
         for (int64_t s = 0; s < S; ++s) { sf[s] = -INFINITY; size[s] = 0.0; total_f[s] = 0.0; }
         for (int64_t p = 0; p < P; ++p) { /* genome order, as scatter_add */
             const int64_t s = sp[p];
             if (f[p] > sf[s]) sf[s] = f[p];
-            size[s] += 1.0; total_f[s] += f[p];
+            size[s] += 1.0; total_f[s] += f[p] * scale;
             if (f[p] < f_min) f_min = f[p];
         }
+        f_min *= scale;
         for (int64_t s = 0; s < S; ++s) {
             const int improved = al[s] && sf[s] > best_in[r * S + s];
             best[s] = improved ? sf[s] : best_in[r * S + s];
