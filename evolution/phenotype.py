@@ -41,6 +41,7 @@ from snn_torch.functional.izhikevich import (
     izhikevich_init,
     izhikevich_run,
 )
+from snn_torch.functional.network_kernel import check_network_index, rate_control_step_kernel
 from snn_torch.functional.recurrent import RecurrentState
 from snn_torch.modules.coding import (
     BangBang,
@@ -277,6 +278,13 @@ class SpikingController(_Phenotype):
         # input and bias currents of each control step: [n] buffer, bias slots at i_input_max
         self._bias = torch.zeros(n, dtype=self.weight.dtype, device=self.weight.device)
         self._bias[self.n_in : self.n_in + self.n_bias] = spec.i_input_max
+        # The C kernel's constants: every node's constant current (as the network adds the
+        # background to the encoder's currents) and the readout weights, contiguous.
+        self._iconst = self._bias + self.network.i_background
+        self._w_out_c = self.w_out.contiguous()
+        self._gain = spec.i_input_max if spec.encoder == "current" else self.encoder.p_max
+        self._checked: Tensor | None = None  # the last row -> network index checked for the kernel
+        self._kernel_plan: tuple | None = None
 
     def initial_state(self, network: Tensor) -> SpikingState:
         network = self._check_network(network)
@@ -300,6 +308,8 @@ class SpikingController(_Phenotype):
         (the C kernel and the rate window write into them); ``select`` or a clone keeps a copy."""
         B, n, n_in = obs01.shape[0], len(self.nodes), self.n_in
         obs01 = obs01 if obs01.dtype == self.weight.dtype else obs01.to(self.weight.dtype)
+        if self.network.path(state.neurons) == "kernel":
+            return self._act_kernel(obs01.contiguous(), state)
         source = None
         # forward(), not __call__: the module hooks cost more than the ops on a small batch
         if self.keys is None:
@@ -312,14 +322,43 @@ class SpikingController(_Phenotype):
                                                     network=state.network, source_spikes=source, inplace=True)
         rates, window = self.window.forward(counts, state.window)
         drive = _weighted_drive(rates, state.w_out, self.rest)
+        return self._decode(drive, state.sigma), state._replace(neurons=neurons, window=window), counts
+
+    def _decode(self, drive: Tensor, sigma: Tensor) -> Tensor:
         decoder = self.spec.decoder
         if decoder == "sigmoid_force":
-            action = self.decoder.forward(drive, state.sigma.unsqueeze(-1))
-        elif decoder == "bang_bang":
-            action = self.decoder.forward(drive)
-        else:
-            action = self.decoder.forward(state.sigma.unsqueeze(-1) * drive)
-        return action, state._replace(neurons=neurons, window=window), counts
+            return self.decoder.forward(drive, sigma.unsqueeze(-1))
+        if decoder == "bang_bang":
+            return self.decoder.forward(drive)
+        return self.decoder.forward(sigma.unsqueeze(-1) * drive)
+
+    def _act_kernel(self, obs01: Tensor, state: SpikingState) -> tuple[Tensor, SpikingState, Tensor]:
+        """``act`` as one C call (encoder, network, rate window, readout; the same bits as the
+        modules): on the CPU a control step's cost is mostly per-op overhead otherwise."""
+        neurons, window, network = state.neurons, state.window, state.network
+        B, n = neurons.v.shape
+        if obs01.shape != (B, self.n_in):
+            raise ValueError(f"observations must be [{B}, {self.n_in}], got {tuple(obs01.shape)}")
+        if network is not self._checked:  # once per batch of rows: the kernel reads weights by it
+            check_network_index(network, B, self.num_genomes)
+            self._checked = network
+        if not all(t.is_contiguous() for t in (*neurons, window.history)):
+            neurons = RecurrentState(*(t.contiguous() for t in neurons))
+            window = RateWindowState(window.history.contiguous(), window.steps)
+        plan = self._kernel_plan
+        if plan is None or plan[0].dtype != neurons.v.dtype:  # constants looked up once, not every step
+            net = self.network
+            plan = self._kernel_plan = (net.effective_weight(neurons.v.dtype), net.p, self.window.window,
+                                        self.window.period_s)
+        w_eff, p, W, period_s = plan
+        steps = window.steps + 1
+        drive, counts = rate_control_step_kernel(
+            obs01, neurons, w_eff, p, dt_ms=self.spec.dt_ms, substeps=self.substeps, network=network,
+            gain=self._gain, iconst=self._iconst, keys=state.keys, base=window.steps * self.substeps * self.n_in,
+            history=window.history, slot=window.steps % W, rate_div=min(steps, W) * period_s, w_out=self._w_out_c,
+            rest=self.rest)
+        window = RateWindowState(window.history, steps)
+        return self._decode(drive, state.sigma), state._replace(neurons=neurons, window=window), counts
 
 
 def _weighted_drive(rates: Tensor, w_out: Tensor, rest: Tensor | None) -> Tensor:

@@ -185,3 +185,49 @@ void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *
 }
 DEFINE_STEPS(izh_network_steps_f32, izh_f32, float)
 DEFINE_STEPS(izh_network_steps_f64, izh_f64, double)
+
+/* One control step of rate-coded controllers (see the header): encode, run the networks, record
+   the counts in the rate window, read the drive out. Each piece repeats the torch modules'
+   operations in their order (snn_torch.modules.coding, ordered_matvec), so the two agree bit for
+   bit; the readout sums over slots in ascending order with a double accumulator. */
+#define DEFINE_CONTROL(NAME, STEPS, T)                                                         \
+void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *x,             \
+          int64_t n_x, T gain, const T *iconst, const int64_t *keys, int64_t base,            \
+          T *history, int64_t window, int64_t slot, T rate_div, const T *w_out,               \
+          int64_t n_out, const T *rest, T *drive, int64_t rows, int64_t n, int64_t substeps,   \
+          T dt, T a, T b, T c, T d, T vpeak, int threads) {                                    \
+    T *iext = (T *)malloc((size_t)(rows * n > 0 ? rows * n : 1) * sizeof(T));                 \
+    double *prob = keys ? (double *)malloc((size_t)(rows * n_x > 0 ? rows * n_x : 1) * sizeof(double)) \
+                        : NULL;                                                                \
+    _Pragma("omp parallel for num_threads(threads) schedule(static)")                         \
+    for (int64_t r = 0; r < rows; ++r) {                                                       \
+        const T *xr = x + r * n_x;                                                             \
+        for (int64_t j = 0; j < n; ++j)                                                        \
+            iext[r * n + j] = (!keys && j < n_x) ? gain * xr[j] + iconst[j] : iconst[j];      \
+        for (int64_t i = 0; keys && i < n_x; ++i) prob[r * n_x + i] = (double)(xr[i] * gain);   \
+    }                                                                                          \
+    STEPS(v, u, z, counts, w, net, iext, NULL, prob, keys, base, rows, n, keys ? n_x : 0,    \
+          substeps, dt, a, b, c, d, vpeak, threads);                                           \
+    free(iext); free(prob);                                                                    \
+    const int64_t plane = rows * n;                                                            \
+    _Pragma("omp parallel for num_threads(threads) schedule(static)")                         \
+    for (int64_t r = 0; r < rows; ++r) {                                                       \
+        T y[MAXN];                                                                             \
+        const int64_t g = net ? net[r] : r;                                                    \
+        memcpy(history + slot * plane + r * n, counts + r * n, n * sizeof(T));                 \
+        for (int64_t j = 0; j < n; ++j) {                                                      \
+            T total = history[r * n + j]; /* whole numbers: exact in any order */              \
+            for (int64_t k = 1; k < window; ++k) total += history[k * plane + r * n + j];      \
+            y[j] = total / rate_div;                                                           \
+            if (rest) y[j] = y[j] - rest[j];                                                   \
+        }                                                                                      \
+        const T *wg = w_out + g * n * n_out;                                                   \
+        for (int64_t k = 0; k < n_out; ++k) {                                                  \
+            double acc = (double)(y[0] * wg[k]);                                               \
+            for (int64_t j = 1; j < n; ++j) acc += (double)(y[j] * wg[j * n_out + k]);         \
+            drive[r * n_out + k] = (T)acc;                                                     \
+        }                                                                                      \
+    }                                                                                          \
+}
+DEFINE_CONTROL(izh_rate_control_step_f32, izh_network_steps_f32, float)
+DEFINE_CONTROL(izh_rate_control_step_f64, izh_network_steps_f64, double)

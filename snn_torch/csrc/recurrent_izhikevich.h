@@ -22,3 +22,28 @@ void izh_network_steps_f64(double *v, double *u, double *z, double *counts, cons
                            const int64_t *keys, int64_t base, int64_t rows, int64_t n, int64_t n_src,
                            int64_t substeps, double dt, double a, double b, double c, double d, double vpeak,
                            int threads);
+
+/* One control step of rate-coded controllers around the networks above (snn_torch's
+   CurrentEncoder or BernoulliEncoder -> network -> RateWindow -> weighted readout), for rows
+   r of observations x[r][0..n_x) normalised to [0, 1]:
+   - encode: keys NULL (current): external current iext[r][j] = gain * x[r][j] + iconst[j] for
+     j < n_x, iconst[j] beyond (iconst: the background, plus the bias nodes' current); keys not
+     NULL (Bernoulli): nodes [0, n_x) are spike sources with probability (double)(x * gain) per
+     substep, drawn from streams keys[r] from counter base, and iext = iconst;
+   - the network steps as izh_network_steps (counts[r] receives the step's spikes);
+   - window: history[slot][r] = counts[r] (history [window][rows][n]); rates y = (sum over the
+     window) / rate_div (Hz), minus rest[j] where rest is not NULL;
+   - readout: drive[r][k] = sum_j y[j] * w_out[net[r]][j][k], each product in T, summed over j
+     ascending in double, rounded once to T. */
+void izh_rate_control_step_f32(float *v, float *u, float *z, float *counts, const float *w, const int64_t *net,
+                               const float *x, int64_t n_x, float gain, const float *iconst, const int64_t *keys,
+                               int64_t base, float *history, int64_t window, int64_t slot, float rate_div,
+                               const float *w_out, int64_t n_out, const float *rest, float *drive, int64_t rows,
+                               int64_t n, int64_t substeps, float dt, float a, float b, float c, float d,
+                               float vpeak, int threads);
+void izh_rate_control_step_f64(double *v, double *u, double *z, double *counts, const double *w,
+                               const int64_t *net, const double *x, int64_t n_x, double gain,
+                               const double *iconst, const int64_t *keys, int64_t base, double *history,
+                               int64_t window, int64_t slot, double rate_div, const double *w_out, int64_t n_out,
+                               const double *rest, double *drive, int64_t rows, int64_t n, int64_t substeps,
+                               double dt, double a, double b, double c, double d, double vpeak, int threads);

@@ -28,7 +28,8 @@ from snn_torch.functional.counter_rng import BernoulliSources
 from snn_torch.functional.izhikevich import IzhikevichParams
 from snn_torch.functional.recurrent import RecurrentState
 
-__all__ = ["MAX_NODES", "kernel_available", "kernel_supports", "network_steps_kernel", "check_network_index"]
+__all__ = ["MAX_NODES", "kernel_available", "kernel_supports", "network_steps_kernel", "check_network_index",
+           "rate_control_step_kernel"]
 
 MAX_NODES = 64  # lane buffers live on the stack
 _CSRC = Path(__file__).resolve().parent.parent / "csrc"
@@ -151,3 +152,45 @@ def network_steps_kernel(
        prob_ptr, keys_ptr, base, B, N, n_src, int(substeps), float(dt_ms), float(p.a), float(p.b), float(p.c), float(p.d), float(p.v_peak),
        torch.get_num_threads())
     return counts, RecurrentState(v, u, z)
+
+
+def rate_control_step_kernel(
+    x: Tensor, state: RecurrentState, w_eff: Tensor, p: IzhikevichParams, *, dt_ms: float, substeps: int,
+    network: Tensor, gain: float, iconst: Tensor, keys: Tensor | None, base: int, history: Tensor, slot: int,
+    rate_div: float, w_out: Tensor, rest: Tensor | None,
+) -> tuple[Tensor, Tensor]:
+    """One control step of a rate-coded controller in one C call: encoder -> network steps ->
+    rate window -> weighted readout (``SpikingController.act`` on the CPU; its torch modules are
+    the definition, and this repeats their operations in order: the same bits, tested).
+
+    Trusted: the caller has checked shapes, dtypes, contiguity and the network indices (an index
+    outside ``w_eff`` would read outside its memory).
+
+    Args:
+        x: ``[B, S]`` observations normalised to [0, 1].
+        state: ``RecurrentState`` of ``[B, N]`` tensors, updated in place.
+        w_eff: effective weights ``[G, N, N]``; network: ``[B]`` int64, each row's network.
+        gain: current encoder (``keys`` None): input ``k`` gets ``gain * x_k + iconst[k]``
+            (mV/ms); Bernoulli encoder: spike probability ``x_k * gain`` per substep, drawn
+            from streams ``keys [B]`` from counter ``base``.
+        iconst: ``[N]`` constant current of every node (background, bias nodes), mV/ms.
+        history: the rate window ``[W, B, N]``, updated in place at ``slot``; rate_div: the
+            window's length (s), rates = spikes / rate_div (Hz).
+        w_out: ``[G, N, K]`` readout weights; rest: ``[N]`` rates subtracted first (Hz), or None.
+
+    Returns:
+        ``(drive [B, K], counts [B, N])``.
+    """
+    v, u, z = state
+    B, N = v.shape
+    K = w_out.shape[-1]
+    counts = torch.empty_like(v)
+    drive = torch.empty((B, K), dtype=v.dtype, device=v.device)
+    lib = _library()
+    fn = lib.izh_rate_control_step_f32 if v.dtype == torch.float32 else lib.izh_rate_control_step_f64
+    fn(v.data_ptr(), u.data_ptr(), z.data_ptr(), counts.data_ptr(), w_eff.data_ptr(), network.data_ptr(),
+       x.data_ptr(), x.shape[1], gain, iconst.data_ptr(), None if keys is None else keys.data_ptr(), base,
+       history.data_ptr(), history.shape[0], slot, rate_div, w_out.data_ptr(), K,
+       None if rest is None else rest.data_ptr(), drive.data_ptr(), B, N, substeps, dt_ms, p.a, p.b, p.c, p.d,
+       p.v_peak, torch.get_num_threads())
+    return drive, counts
