@@ -13,6 +13,7 @@ so each run's history is exactly what it would be alone.
 
 from __future__ import annotations
 
+import numbers
 import os
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -38,6 +39,12 @@ from evolution.speciate import SpeciesState, empty_species, speciate
 from snn_torch._malloc import keep_freed_memory
 
 __all__ = ["NEAT", "NEATResult", "FitnessError"]
+
+
+def _genome_fields(dtype: torch.dtype, N: int) -> list[tuple[str, tuple[int, ...], torch.dtype]]:
+    """(field, shape after the [R, K] axes, dtype) of each ``Genomes`` tensor."""
+    return [("weight", (N, N), dtype), ("conn", (N, N), torch.bool), ("enabled", (N, N), torch.bool),
+            ("node", (N,), torch.bool), ("sigma", (), dtype)]
 
 FitnessFn = Callable[[Genomes], Tensor]
 
@@ -75,7 +82,7 @@ class NEAT:
             raise ConfigError(f"config must be a NEATConfig, got {type(config).__name__}")
         keep_freed_memory()  # the children's tensors of each generation reuse the last ones' memory
         self.config = config
-        self.rng = RunRNG([int(s) for s in seeds], device)
+        self.rng = RunRNG(_seed_list(seeds), device)
         self.dtype = dtype
         self.generation = 0
         self.fitness_target = config.fitness_threshold
@@ -156,6 +163,8 @@ class NEAT:
             raise FitnessError(f"fitness must be a tensor of shape [{R}, {P}], got {type(fitness).__name__}")
         if tuple(fitness.shape) != (R, P):
             raise FitnessError(f"fitness must have shape [{R}, {P}] (runs, genomes), got {tuple(fitness.shape)}")
+        if fitness.is_complex():  # .to(float64) would drop the imaginary part without a word
+            raise FitnessError(f"fitness must be real, got a {fitness.dtype} tensor")
         fitness = fitness.to(device=self.device, dtype=torch.float64)
         bad = ~torch.isfinite(fitness)
         if bool(bad.any()):
@@ -269,6 +278,46 @@ class NEAT:
                           self.generation)
 
     # --- checkpoints -------------------------------------------------------------------
+    def _state_problem(self) -> str | None:
+        """What is wrong with a restored state's tensors (shapes, dtypes, ranges), or None.
+
+        The C kernels index with these tensors, so a crafted checkpoint must stop here, not there."""
+        R, P, N = self.num_runs, self.config.pop_size, self.config.num_nodes
+        S = self.species_state.alive.shape[1] if self.species_state.alive.dim() == 2 else -1
+        expect = {  # name: (tensor, shape, dtype)
+            **{f"genomes.{k}": (getattr(self.genomes, k), (R, P, *tail), dt) for k, tail, dt in _genome_fields(self.dtype, N)},
+            **{f"best_genomes.{k}": (getattr(self.best_genomes, k), (R, 1, *tail), dt)
+               for k, tail, dt in _genome_fields(self.dtype, N)},
+            "species": (self.species, (R, P), torch.long),
+            "species_state.alive": (self.species_state.alive, (R, S), torch.bool),
+            "species_state.rep_conn": (self.species_state.rep_conn, (R, S, N, N), torch.bool),
+            "species_state.rep_weight": (self.species_state.rep_weight, (R, S, N, N), self.dtype),
+            "species_state.rep_sigma": (self.species_state.rep_sigma, (R, S), self.dtype),
+            "species_state.best_fitness": (self.species_state.best_fitness, (R, S), torch.float64),
+            "species_state.last_improved": (self.species_state.last_improved, (R, S), torch.long),
+            "species_state.created": (self.species_state.created, (R, S), torch.long),
+            "species_state.ident": (self.species_state.ident, (R, S), torch.long),
+            "species_state.next_id": (self.species_state.next_id, (R,), torch.long),
+            "best_fitness": (self.best_fitness, (R,), torch.float64),
+            "solved_generation": (self.solved_generation, (R,), torch.long),
+        }
+        for key, (t, shape, dtype) in expect.items():
+            if not isinstance(t, Tensor) or tuple(t.shape) != shape or t.dtype != dtype:
+                got = (tuple(t.shape), t.dtype) if isinstance(t, Tensor) else type(t).__name__
+                return f"{key} should be {shape} {dtype} for its {R} runs of {P} genomes, got {got}"
+        if S < 1:
+            return "species_state has no species slots"
+        if self.generation < 0:
+            return f"generation is {self.generation}"
+        if bool(((self.species < 0) | (self.species >= S)).any()):
+            return f"species holds a slot outside [0, {S})"
+        if bool(((self.solved_generation < -1) | (self.solved_generation > self.generation)).any()):
+            return f"solved_generation lies outside [-1, {self.generation}]"
+        if bool(torch.isnan(self.best_fitness).any()):
+            return "best_fitness holds NaN"
+        return None
+
+
     def state_dict(self) -> dict:
         """A snapshot of the whole state (copies: later generations, which write the population
         in place, do not change it), as ``save_checkpoint`` writes and ``from_state_dict`` reads."""
@@ -297,8 +346,14 @@ class NEAT:
     @classmethod
     def restore(cls, path: str | os.PathLike, *, device: str | torch.device | None = None) -> NEAT:
         """Load a checkpoint. Raises ``CheckpointError`` naming the file if it is damaged."""
-        return cls.from_state_dict(load_checkpoint_dict(path, map_location="cpu"), device=device,
-                                   name=os.fspath(path))
+        data = load_checkpoint_dict(path, map_location="cpu")
+        if "neat" in data and "identity" in data:  # written by `snn-neat reproduce/evolve/xor`
+            command = data["identity"].get("command", "reproduce") if isinstance(data["identity"], dict) else "reproduce"
+            raise CheckpointError(
+                f"{os.fspath(path)!r} is a checkpoint of `snn-neat {command}`, which holds a NEAT state and "
+                f"the command's own records: continue it with `snn-neat {command} ... --resume`, or take its NEAT "
+                "state with NEAT.from_state_dict(load_checkpoint_dict(path)['neat'])")
+        return cls.from_state_dict(data, device=device, name=os.fspath(path))
 
     @classmethod
     def from_state_dict(cls, data: dict, *, device: str | torch.device | None = None,
@@ -306,7 +361,10 @@ class NEAT:
         """Rebuild a NEAT from ``state_dict()``; ``name`` labels errors (the file it came from)."""
         try:
             config = NEATConfig(**data["config"])
-            dtype = getattr(torch, data["dtype"])
+            dtype = {"float32": torch.float32, "float64": torch.float64}.get(data["dtype"])
+            if dtype is None:
+                raise CheckpointError(f"checkpoint {name!r} is malformed: dtype {data['dtype']!r} is not "
+                                      "float32 or float64")
             saved = torch.device(data["device"])
             target = torch.device(device) if device is not None else saved
             if target.type != saved.type:
@@ -333,14 +391,24 @@ class NEAT:
             raise
         except (KeyError, TypeError, ValueError, AttributeError, RuntimeError) as exc:
             raise CheckpointError(f"checkpoint {name!r} is malformed ({type(exc).__name__}: {exc})") from exc
-        R, P, N = self.num_runs, config.pop_size, config.num_nodes
-        if tuple(self.genomes.weight.shape) != (R, P, N, N) or tuple(self.species.shape) != (R, P):
-            raise CheckpointError(f"checkpoint {name!r} is malformed: tensor shapes do not match its config")
+        problem = self._state_problem()
+        if problem:
+            raise CheckpointError(f"checkpoint {name!r} is malformed: {problem}")
         try:  # the distances and the kernels rely on them (no gene: weight 0), so a damaged population stops here
             check_invariants(self.genomes, config)
         except InvariantError as exc:
             raise CheckpointError(f"checkpoint {name!r} is malformed: its population breaks an invariant ({exc})") from exc
         return self
+
+
+def _seed_list(seeds: Iterable[int]) -> list[int]:
+    """``seeds`` as Python ints; a float or bool is refused rather than truncated (1.5 is not seed 1)."""
+    out = []
+    for s in seeds:
+        if isinstance(s, bool) or not isinstance(s, numbers.Integral):
+            raise ValueError(f"seeds must be non-negative integers below 2**63, got {s!r}")
+        out.append(int(s))
+    return out
 
 
 def _snapshot(t: Tensor) -> Tensor:

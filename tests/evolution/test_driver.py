@@ -253,3 +253,50 @@ def test_tqdm_reporter_runs_and_closes(capsys):
     neat.run(fitness_fn, 3)
     assert bar.bar is None
     assert "3/3" in capsys.readouterr().err
+
+
+def test_fractional_or_bool_seeds_and_complex_fitness_are_refused_not_truncated():
+    import numpy as np
+
+    for seeds in ([1.5], [True], ["3"]):
+        with pytest.raises(ValueError, match="seeds must be non-negative integers"):
+            NEAT(CFG, seeds=seeds)
+    assert NEAT(CFG, seeds=[np.int64(4)]).rng.seeds == [4]  # numpy integers are integers
+    neat = NEAT(CFG, seeds=[1])
+    with pytest.raises(FitnessError, match="must be real"):
+        neat.tell(torch.zeros(1, 30, dtype=torch.complex128) + 1j)
+    assert neat.generation == 0
+
+
+def test_restoring_a_command_checkpoint_says_what_it_is(tmp_path):
+    from evolution.checkpoint import atomic_torch_save, load_checkpoint_dict
+
+    state = NEAT(CFG, seeds=[1]).state_dict()
+    path = atomic_torch_save({"format": state["format"], "version": state["version"], "identity": {"task": "table2"},
+                              "neat": state, "history": torch.zeros(0, 1)}, tmp_path / "snn.ckpt")
+    with pytest.raises(CheckpointError, match=r"snn.ckpt.*snn-neat reproduce .*--resume.*\['neat'\]"):
+        NEAT.restore(path)
+    assert NEAT.from_state_dict(load_checkpoint_dict(path)["neat"]).generation == 0  # what the message offers
+
+
+@pytest.mark.parametrize("key, damage, match", [
+    ("species", lambda t: t.fill_(99), r"species holds a slot outside"),
+    ("species", lambda t: t[:, :5], r"species should be \(1, 30\)"),
+    ("species", lambda t: t.int(), r"species should be .*torch.int64"),
+    ("best_fitness", lambda t: t.float(), r"best_fitness should be"),
+    ("solved_generation", lambda t: t.fill_(7), r"solved_generation lies outside"),
+    ("best_genomes.weight", lambda t: t[:, :, :2], r"best_genomes.weight should be"),
+    ("species_state.rep_weight", lambda t: t[:, :1], r"species_state.rep_weight should be"),
+    ("species_state.next_id", lambda t: t[:0], r"species_state.next_id should be"),
+])
+def test_a_crafted_checkpoint_with_wrong_shapes_is_refused(key, damage, match):
+    state = NEAT(CFG, seeds=[1]).state_dict()
+    parent, _, leaf = key.rpartition(".")
+    holder = state[parent] if parent else state
+    holder[leaf] = damage(holder[leaf])
+    with pytest.raises(CheckpointError, match=match):
+        NEAT.from_state_dict(state, name="crafted")
+    state = NEAT(CFG, seeds=[1]).state_dict()
+    state["dtype"] = "manual_seed"
+    with pytest.raises(CheckpointError, match="not float32 or float64"):
+        NEAT.from_state_dict(state, name="crafted")
