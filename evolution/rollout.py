@@ -137,18 +137,19 @@ def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=
     n_obs = task.observation_size
     returns = torch.zeros(B, dtype=torch.float64, device=device)
     steps = torch.zeros(B, dtype=torch.int64, device=device)
+    batch_returns, batch_steps = returns, steps  # of the rows in the batch (all of them until compacted)
     trace: dict[str, list] | None = {"observation": [], "action": [], "reward": [], "activity": [], "state": []} \
         if record else None
-    compacted, every_row_alive = False, True
+    compacted, every_row_alive, n_rows = False, True, B
     for _ in range(max_steps):
         obs = task.observe(state)
-        _check_batch(task, "observe()", "observation", obs, len(rows), (n_obs,))
+        _check_batch(task, "observe()", "observation", obs, n_rows, (n_obs,))
         obs01 = ((obs if obs.dtype == dtype else obs.to(dtype)) - low) / span
         obs01 = torch.clamp(obs01, zero, one)
         action, cstate, activity = controller.act(obs01, cstate)
         new_state, reward, terminated = task.step(state, action)
-        _check_batch(task, "step()", "reward", reward, len(rows), ())
-        _check_batch(task, "step()", "terminated", terminated, len(rows), ())
+        _check_batch(task, "step()", "reward", reward, n_rows, ())
+        _check_batch(task, "step()", "terminated", terminated, n_rows, ())
         if terminated.dtype != torch.bool:
             raise TaskError(f"task {task.name!r}: step() must return terminated as a bool tensor, got {terminated.dtype}")
         # One cheap test per step (a sum is finite unless some term is not, or it overflows); the
@@ -156,18 +157,14 @@ def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=
         if not bool(torch.isfinite(obs.sum() + reward.sum())):
             _check_finite(task, "observe()", "observation", obs, alive, rows, episodes)
             _check_finite(task, "step()", "reward", reward, alive, rows, episodes)
-        if isinstance(new_state, Tensor) and new_state.shape[0] != len(rows):
-            _check_batch(task, "step()", "state", new_state, len(rows))
+        if isinstance(new_state, Tensor) and new_state.shape[0] != n_rows:
+            _check_batch(task, "step()", "state", new_state, n_rows)
         if every_row_alive:  # the usual case needs no masking (fewer ops per step)
             gained, still = reward.to(torch.float64), ~terminated
         else:
             gained, still = torch.where(alive, reward.to(torch.float64), zero64), alive & ~terminated
-        if compacted:
-            returns[rows] += gained
-            steps[rows] += still
-        else:
-            returns += gained
-            steps += still
+        batch_returns += gained
+        batch_steps += still
         # a finished episode's plant is not simulated further
         state = new_state if every_row_alive else _where_rows(alive, new_state, state)
         alive = still
@@ -183,12 +180,19 @@ def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=
         n_alive = int(alive.sum())
         if n_alive == 0:
             break
-        every_row_alive = n_alive == alive.numel()
-        if n_alive < compact_below * alive.numel():
+        every_row_alive = n_alive == n_rows
+        if n_alive < compact_below * n_rows:
             keep = torch.nonzero(alive).flatten()
             cstate = controller.select(cstate, keep)
+            if compacted:  # the dropped rows' totals are final: write the batch's back
+                returns.index_copy_(0, rows, batch_returns)
+                steps.index_copy_(0, rows, batch_steps)
             rows, state, alive = rows[keep], _rows(state, keep), alive[keep]
-            compacted, every_row_alive = True, True
+            batch_returns, batch_steps = batch_returns[keep], batch_steps[keep]
+            compacted, every_row_alive, n_rows = True, True, n_alive
+    if compacted:
+        returns.index_copy_(0, rows, batch_returns)
+        steps.index_copy_(0, rows, batch_steps)
     out = None
     if trace is not None:
         out = {k: torch.stack(v) for k, v in trace.items() if v}

@@ -19,7 +19,7 @@ import torch
 from torch import Tensor
 
 from evolution.task import Task
-from snn_torch.functional.scalars import scalar
+from snn_torch.functional.scalars import scalars
 
 __all__ = ["CartPoleParams", "DEFAULT_PLANT", "PlantError", "cartpole_step", "cartpole_failed", "check_state", "X", "X_DOT",
            "THETA", "THETA_DOT", "CartPoleTask", "X_DOT_LIMIT", "THETA_DOT_LIMIT", "THETA0_RAD"]
@@ -61,15 +61,15 @@ def cartpole_step(state: Tensor, force: Tensor, tau: float, p: CartPoleParams = 
     total = p.cart_mass + p.pole_mass
     # The constants as cached 0-dim tensors: the same bits as Python floats (rounded to the
     # state's dtype either way), at half the cost per op on a small batch.
-    mpl, neg_total, pos_total = (scalar(c, state) for c in (p.pole_mass * p.half_length, -total, total))
-    gravity, half_length = scalar(p.gravity, state), scalar(p.half_length, state)
-    four_thirds, mass_ratio = scalar(4.0 / 3.0, state), scalar(p.pole_mass / total, state)
+    mpl, neg_total, pos_total, gravity, half_length, four_thirds, mass_ratio, tau_t = scalars(
+        (p.pole_mass * p.half_length, -total, total, p.gravity, p.half_length, 4.0 / 3.0, p.pole_mass / total,
+         float(tau)), state)
     sin, cos = torch.sin(theta), torch.cos(theta)
     w2_sin = theta_dot * theta_dot * sin
     temp = (force + mpl * w2_sin) / neg_total  # = (-F - m l w^2 sin) / (m_c + m)
     theta_acc = (gravity * sin + cos * temp) / (half_length * (four_thirds - mass_ratio * (cos * cos)))
     x_acc = (force + mpl * (w2_sin - theta_acc * cos)) / pos_total
-    return state + torch.stack([x_dot, x_acc, theta_dot, theta_acc], -1) * scalar(tau, state)
+    return state + torch.stack([x_dot, x_acc, theta_dot, theta_acc], -1) * tau_t
 
 
 def cartpole_failed(state: Tensor, p: CartPoleParams = DEFAULT_PLANT) -> Tensor:

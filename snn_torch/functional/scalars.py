@@ -10,7 +10,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-__all__ = ["scalar"]
+__all__ = ["scalar", "scalars"]
 
 _CACHE: dict[tuple, Tensor] = {}
 
@@ -21,4 +21,17 @@ def scalar(value: float, like: Tensor) -> Tensor:
     t = _CACHE.get(key)
     if t is None:
         t = _CACHE[key] = torch.tensor(float(value), dtype=like.dtype, device=like.device)
+    return t
+
+
+_MANY: dict[tuple, tuple[Tensor, ...]] = {}
+
+
+def scalars(values: tuple[float, ...], like: Tensor) -> tuple[Tensor, ...]:
+    """``scalar(v, like)`` for each of ``values``, with one cache lookup for them all (a plant's or a
+    decoder's constants, fetched once per step)."""
+    key = (values, like.dtype, like.device)
+    t = _MANY.get(key)
+    if t is None:
+        t = _MANY[key] = tuple(scalar(v, like) for v in values)
     return t

@@ -21,7 +21,7 @@ from torch import Tensor, nn
 
 from snn_torch.functional.counter_rng import BernoulliSources
 from snn_torch.functional.decode import ordered_sigmoid
-from snn_torch.functional.scalars import scalar
+from snn_torch.functional.scalars import scalar, scalars
 
 __all__ = ["CurrentEncoder", "BernoulliEncoder", "RateWindow", "RateWindowState", "SigmoidForce", "BangBang",
            "LinearReadout"]
@@ -135,7 +135,8 @@ class SigmoidForce(nn.Module):
 
     def forward(self, drive: Tensor, sigma: Tensor | float = 1.0) -> Tensor:
         y = ordered_sigmoid(sigma * drive)
-        return scalar(self.f_max, y) * (scalar(2.0, y) * y - scalar(1.0, y))
+        f_max, two, one = scalars((self.f_max, 2.0, 1.0), y)
+        return f_max * (two * y - one)
 
     def extra_repr(self) -> str:
         return f"f_max={self.f_max} (N)"
