@@ -30,7 +30,12 @@ import time
 
 from compare_neat_python import plant_step  # the plant in Python floats (same folder)
 
-from tasks.experiments.sensitivity import seed_range
+
+def seed_range(text: str) -> list[int]:
+    """``"0-59"`` -> [0, ..., 59]; ``"7"`` -> [7]."""
+    lo, _, hi = text.partition("-")
+    return list(range(int(lo), int(hi or lo) + 1))
+
 
 TASKS = {
     # observed state indices, normalisation bounds, tau (s), success steps, bang-bang

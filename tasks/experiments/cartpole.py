@@ -79,11 +79,11 @@ GA_PRESETS: dict[str, dict] = {
 
 
 # Each controller's GA settings per table, as used by ``snn-neat reproduce`` (``--ga tuned``):
-# picked by ``python -m tasks.experiments.tune_ga`` on tuning seeds 5000-5059 (5000-5031 for
+# picked by ``python -m experiments.tune_ga`` on tuning seeds 5000-5059 (5000-5031 for
 # NEAT-SNN on Table I), never on a reported seed set, from the same grid for every controller:
 # both presets x survival threshold 0.1 or 0.2 ([Qiu19]'s); for NEAT-SNN on Table I only the
 # neat-c++ preset (its 100,000-step spiking episodes made the neat-python runs too costly). The
-# numbers behind each pick are in the README ("GA settings, chosen per controller"). Table II
+# numbers behind each pick are in docs/reproducing.md ("GA settings, chosen per controller"). Table II
 # was re-tuned under the counter-based streams (NEAT-SNN: survival 0.1 -> 0.2, mean 12.35 ->
 # 11.08; sigmoid NEAT unchanged); Table I's picks date from the earlier mt19937 streams.
 TUNED_GA: dict[tuple[str, str], tuple[str, dict]] = {

@@ -316,9 +316,9 @@ def test_founders_never_take_a_slot_that_has_members():
 
 
 def test_the_slot0_check_puts_the_old_rule_back(monkeypatch):
-    # tasks.experiments.slot0_bug_check is only meaningful if its rule shows the old bug.
+    # experiments.slot0_bug_check is only meaningful if its rule shows the old bug.
     import evolution.speciate as speciate_module
-    from tasks.experiments.slot0_bug_check import _free_slot_before_the_fix
+    from experiments.slot0_bug_check import _free_slot_before_the_fix
 
     monkeypatch.setattr(speciate_module, "_free_slot", _free_slot_before_the_fix)
     cfg, g, sp = _slot0_case()

@@ -122,8 +122,8 @@ def test_mann_whitney_and_counting():
 
 
 def test_sensitivity_sweep_rows_and_cli(capsys):
-    from tasks.experiments.sensitivity import main as sensitivity_main
-    from tasks.experiments.sensitivity import sweep
+    from experiments.sensitivity import main as sensitivity_main
+    from experiments.sensitivity import sweep
 
     rows = sweep("table2", "weight_mutate_power", [0.5, 2.5], [0, 1, 2], generations=3)
     assert [(r["value"], r["controller"]) for r in rows] == [(0.5, "snn"), (0.5, "sigmoid"), (2.5, "snn"),
@@ -138,8 +138,8 @@ def test_sensitivity_sweep_rows_and_cli(capsys):
 
 
 def test_ga_choice_reaches_the_config_and_guards_resume(tmp_path):
+    from experiments.sensitivity import parse_value
     from tasks.experiments.cartpole import GA_CHOICES, TUNED_GA, ga_choice
-    from tasks.experiments.sensitivity import parse_value
 
     python_like = run_controller("table1", "sigmoid", [0, 1], 1, tmp_path / "np", ga="neat-python", progress=False)
     cfg = python_like.config
@@ -165,8 +165,8 @@ def test_ga_choice_reaches_the_config_and_guards_resume(tmp_path):
 
 
 def test_tune_ga_tries_every_preset_and_threshold_and_picks_the_lowest_mean(capsys):
-    from tasks.experiments.tune_ga import main as tune_main
-    from tasks.experiments.tune_ga import tune
+    from experiments.tune_ga import main as tune_main
+    from experiments.tune_ga import tune
 
     seen = []
     rows, best = tune("table2", "sigmoid", [0, 1], survival=[0.1, 0.2], generations=2, report=seen.append)

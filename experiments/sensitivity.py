@@ -1,6 +1,6 @@
 """How much does one NEAT setting move a reproduction's result?
 
-    python -m tasks.experiments.sensitivity table2 --param weight_mutate_power --values 0.5,1,2.5 --seeds 0-59
+    python -m experiments.sensitivity table2 --param weight_mutate_power --values 0.5,1,2.5 --seeds 0-59
 
 For each value of ``--param`` (any ``NEATConfig`` field), evolves ``--seeds`` runs of each
 controller on the table's task, all runs of a controller in one batch, with everything else

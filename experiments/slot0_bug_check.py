@@ -1,6 +1,6 @@
 """Did the species slot-0 bug move Table II? Rerun it with the bug put back.
 
-    python -m tasks.experiments.slot0_bug_check --out results/table2-slot0-bug [--seed 60]
+    python -m experiments.slot0_bug_check --out results/table2-slot0-bug [--seed 60]
 
 Until the counter-based streams came in, a new species could be founded in slot 0 while
 slot 0 still had members: ``_free_slot`` scattered membership flags, and an unassigned

@@ -1,6 +1,6 @@
 """Does a NEAT-SNN champion use memory? Run it with its state carried, wiped, or settled.
 
-    python -m tasks.experiments.memory_ablation results/table2/champions
+    python -m experiments.memory_ablation results/table2/champions
 
 Three ways to run each champion from the paper's start (theta = 3 degrees) for 5000 steps:
 

@@ -1,6 +1,6 @@
 """Pick each controller's GA settings on tuning seeds, the same way for every controller.
 
-    python -m tasks.experiments.tune_ga table1 --controllers sigmoid --seeds 5000-5059
+    python -m experiments.tune_ga table1 --controllers sigmoid --seeds 5000-5059
 
 For every GA preset (``GA_PRESETS``: NEAT C++'s and neat-python's defaults) and every
 survival threshold in ``--survival`` (the share of a species that breeds, the setting the
@@ -10,7 +10,7 @@ the lowest mean, ties broken by the lower median, then by the order of the grid.
 seeds (5000 and up) are never among the reported seed sets (0-59, 60-119), so a setting is
 never chosen on the runs it is judged by. The picks used by ``snn-neat reproduce`` are
 recorded in ``TUNED_GA`` (``tasks/experiments/cartpole.py``), the numbers that chose them in
-the README.
+docs/reproducing.md.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ from collections.abc import Callable
 
 import torch
 
+from experiments.sensitivity import parse_value, seed_range, sweep
 from tasks.experiments.cartpole import GA_PRESETS
-from tasks.experiments.sensitivity import parse_value, seed_range, sweep
 
 __all__ = ["tune"]
 
