@@ -9,6 +9,10 @@ call per control step. It is generic: any number of nodes up to ``MAX_NODES``, a
 an index (several episodes per network, finished episodes compacted away without copying
 weights).
 
+``rate_control_step_kernel`` wraps it in a whole control step of a rate-coded controller
+(encoder, network, rate window, weighted readout: ``evolution.SpikingController`` on the CPU),
+so a closed loop pays one C call per step instead of a dozen small tensor ops.
+
 It repeats the torch step's operations in order with no contraction, so the two agree bit for
 bit (``tests/snn_torch/test_network_kernel.py``): results do not depend on whether a C compiler
 is present. Rows are independent: a row's result does not depend on its batch or the thread
@@ -50,7 +54,7 @@ def _library() -> KernelLibrary | None:
 
 # What the fallback costs (benchmarks/seam_speed.py --torch-path, this 2-core CPU, one thread).
 TORCH_PATH_NOTE = ("snn-neat: spiking networks run on the torch path (no C network kernel): the same results, "
-                   "but closed loops of small networks run about 16x (150 networks) to 10x (9000) slower "
+                   "but closed loops of small networks run about 25x (150 networks) to 10x (9000) slower "
                    "on the CPU; install a C compiler (cc/gcc) for the kernel")
 
 
