@@ -23,7 +23,7 @@ import torch
 
 from evolution.checkpoint import CheckpointError, atomic_write_bytes
 from evolution.config import NEATConfig
-from evolution.population import Genomes
+from evolution.population import Genomes, InvariantError, check_invariants
 
 __all__ = ["GENOME_FORMAT", "GENOME_VERSION", "genome_to_dict", "genome_from_dict", "save_genome", "load_genome",
            "to_networkx", "node_kind"]
@@ -68,43 +68,89 @@ def _fail(where: str, what: str) -> CheckpointError:
 
 def genome_from_dict(data: dict, config: NEATConfig, *, where: str = "<dict>",
                      dtype: torch.dtype = torch.float32) -> Genomes:
-    """A ``[1, 1]`` population holding the genome in ``data``, placed in ``config``'s index."""
+    """A ``[1, 1]`` population holding the genome in ``data``, placed in ``config``'s index.
+
+    Everything is checked against ``config`` (layout, node kinds, weight and sigma limits, the
+    population invariants): a ``CheckpointError`` names ``where`` and the field at fault."""
     if not isinstance(data, dict) or data.get("format") != GENOME_FORMAT:
         raise _fail(where, f"not an {GENOME_FORMAT} file")
     if data.get("version") != GENOME_VERSION:
-        raise _fail(where, f"version {data.get('version')!r} is not supported (this snn-neat reads {GENOME_VERSION})")
+        raise _fail(where, f"version {_short(data.get('version'))} is not supported (this snn-neat reads {GENOME_VERSION})")
     layout = data.get("layout")
-    want = {"num_inputs": config.num_inputs, "num_bias": config.num_bias, "num_outputs": config.num_outputs}
-    if not isinstance(layout, dict) or any(layout.get(k) != v for k, v in want.items()):
-        raise _fail(where, f"layout {layout!r} does not match the config's {want}")
+    want = {"num_inputs": config.num_inputs, "num_bias": config.num_bias, "num_outputs": config.num_outputs,
+            "num_nodes": config.num_nodes}
+    if not isinstance(layout, dict) or any(type(layout.get(k)) is not int or layout.get(k) != v
+                                           for k, v in want.items()):
+        raise _fail(where, f"layout {_short(layout)} does not match the config's {want}")
     N = config.num_nodes
     node = torch.zeros(N, dtype=torch.bool)
     node[: config.first_hidden] = True
+    seen: set[int] = set()
     for entry in _list(data, "nodes", where):
         i = _slot(entry, "id", where, N)
+        if i in seen:
+            raise _fail(where, f"node {i} appears twice in 'nodes'")
+        seen.add(i)
+        if entry.get("kind") != node_kind(config, i):
+            raise _fail(where, f"node {i} has kind {_short(entry.get('kind'))}; in this layout it is "
+                               f"{node_kind(config, i)!r}")
         node[i] = True
     conn = torch.zeros(N, N, dtype=torch.bool)
     enabled = torch.zeros(N, N, dtype=torch.bool)
     weight = torch.zeros(N, N, dtype=dtype)
+    lo, hi = config.weight_min_value, config.weight_max_value
     for entry in _list(data, "connections", where):
         i, j = _slot(entry, "from", where, N), _slot(entry, "to", where, N)
-        w = entry.get("weight")
-        if isinstance(w, bool) or not isinstance(w, (int, float)) or not math.isfinite(w):
-            raise _fail(where, f"connection {i}->{j} has weight {w!r}; expected a finite number")
+        w = _number(entry.get("weight"), where, f"connection {i}->{j} weight")
+        if not lo <= w <= hi:
+            raise _fail(where, f"connection {i}->{j} weight {w!r} lies outside the config's [{lo}, {hi}] "
+                               "(weight_min_value, weight_max_value)")
         if not isinstance(entry.get("enabled"), bool):
-            raise _fail(where, f"connection {i}->{j} has enabled={entry.get('enabled')!r}; expected true/false")
+            raise _fail(where, f"connection {i}->{j} has enabled={_short(entry.get('enabled'))}; expected true/false")
         if not (node[i] and node[j]):
             raise _fail(where, f"connection {i}->{j} refers to a node missing from 'nodes'")
         if conn[i, j]:
             raise _fail(where, f"connection {i}->{j} appears twice")
         if j < config.first_output:
             raise _fail(where, f"connection {i}->{j} leads into an input or bias node")
-        conn[i, j], enabled[i, j], weight[i, j] = True, entry["enabled"], float(w)
-    sigma = data.get("sigma")
-    if isinstance(sigma, bool) or not isinstance(sigma, (int, float)) or not math.isfinite(sigma):
-        raise _fail(where, f"sigma is {sigma!r}; expected a finite number")
-    return Genomes(weight=weight[None, None], conn=conn[None, None], enabled=enabled[None, None],
-                   node=node[None, None], sigma=torch.tensor([[float(sigma)]], dtype=dtype))
+        conn[i, j], enabled[i, j], weight[i, j] = True, entry["enabled"], w
+    sigma = _number(data.get("sigma"), where, "sigma")
+    if not config.sigma_min_value <= sigma <= config.sigma_max_value:
+        raise _fail(where, f"sigma {sigma!r} lies outside the config's [{config.sigma_min_value}, "
+                           f"{config.sigma_max_value}] (sigma_min_value, sigma_max_value)")
+    fitness = data.get("fitness")
+    if fitness is not None:
+        _number(fitness, where, "fitness")
+    g = Genomes(weight=weight[None, None], conn=conn[None, None], enabled=enabled[None, None],
+                node=node[None, None], sigma=torch.tensor([[sigma]], dtype=dtype))
+    try:  # what the kernels and distances rely on (a feed-forward config's genome has no cycle, ...)
+        check_invariants(Genomes(**{k: v.expand(1, config.pop_size, *v.shape[2:]) for k, v in g.tensors().items()}),
+                         config)
+    except InvariantError as exc:
+        raise _fail(where, f"the genome breaks an invariant of this config: {exc}") from None
+    return g
+
+
+def _short(value: object, limit: int = 80) -> str:
+    """``repr(value)``, cut to ``limit`` characters (a 400-digit number or a huge list stays readable)."""
+    try:
+        text = repr(value)
+    except ValueError:  # an int too long for repr (sys.set_int_max_str_digits)
+        text = f"<{type(value).__name__} too long to print>"
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _number(value: object, where: str, what: str) -> float:
+    """``value`` as a finite float (a JSON number), else ``CheckpointError`` naming ``what``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise _fail(where, f"{what} is {_short(value)}; expected a finite number")
+    try:
+        x = float(value)
+    except OverflowError:  # an integer beyond float range
+        x = math.inf
+    if not math.isfinite(x):
+        raise _fail(where, f"{what} is {_short(value)}; expected a finite number")
+    return x
 
 
 def _list(data: dict, key: str, where: str) -> list:
@@ -117,7 +163,7 @@ def _list(data: dict, key: str, where: str) -> list:
 def _slot(entry: dict, key: str, where: str, n: int) -> int:
     value = entry.get(key)
     if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < n:
-        raise _fail(where, f"'{key}' is {value!r}; expected a node id in [0, {n})")
+        raise _fail(where, f"'{key}' is {_short(value)}; expected a node id in [0, {n})")
     return value
 
 
@@ -136,8 +182,8 @@ def load_genome(path: str | os.PathLike, config: NEATConfig, *, dtype: torch.dty
             data = json.load(fh)
     except FileNotFoundError:
         raise _fail(repr(name), "does not exist") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise _fail(repr(name), f"is not valid JSON ({exc})") from exc
+    except (OSError, ValueError, RecursionError) as exc:  # ValueError: bad JSON, UTF-8, or a 5000-digit int
+        raise _fail(repr(name), f"is not valid JSON ({_short(str(exc), 200)})") from exc
     return genome_from_dict(data, config, where=repr(name), dtype=dtype)
 
 

@@ -389,7 +389,7 @@ class NEAT:
             self.rng.set_state(data["rng"])
         except CheckpointError:
             raise
-        except (KeyError, TypeError, ValueError, AttributeError, RuntimeError) as exc:
+        except (KeyError, TypeError, ValueError, AttributeError, RuntimeError, OverflowError, IndexError) as exc:
             raise CheckpointError(f"checkpoint {name!r} is malformed ({type(exc).__name__}: {exc})") from exc
         problem = self._state_problem()
         if problem:
