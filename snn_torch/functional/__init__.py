@@ -26,6 +26,7 @@ from snn_torch.functional.izhikevich import (
     izhikevich_run,
     izhikevich_step,
 )
+from snn_torch.functional.izhikevich_fused import izhikevich_step_fused
 from snn_torch.functional.recurrent import (
     RecurrentState,
     masked_weights,
@@ -41,7 +42,7 @@ __all__ = [
     "RESONATOR", "SOLVERS", "IzhikevichParams", "IzhikevichState", "RecurrentState",
     "bang_bang_force", "background_current", "bernoulli_encode", "current_encode",
     "fast_sigmoid", "firing_rate", "heaviside", "izhikevich_init", "izhikevich_run",
-    "izhikevich_step", "masked_weights", "normalize", "rate_encode", "recurrent_init",
+    "izhikevich_step", "izhikevich_step_fused", "masked_weights", "normalize", "rate_encode", "recurrent_init",
     "recurrent_izhikevich_run", "recurrent_izhikevich_step", "superspike", "triangle",
     "weighted_rate_force",
 ]

@@ -2,10 +2,16 @@
 
 State is explicit: every ``forward`` takes an optional state and returns ``(spikes, state)``.
 No buffers hold state, so modules are reentrant and a state can be detached, saved or
-reset by the caller.
+reset by the caller (``snn_torch.Stateful`` keeps it for ``nn.Sequential``).
+
+Neuron parameters ``a, b, c, d, v_peak`` are registered ``nn.Parameter`` s of those names
+(``requires_grad`` only for the fields in ``learn_params``), so ``.to()``, ``state_dict`` and
+optimizers see them. They are cast to the input's dtype at each call.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import torch
 from torch import Tensor, nn
@@ -17,16 +23,23 @@ from snn_torch.functional.izhikevich import (
     QIU2019,
     IzhikevichParams,
     IzhikevichState,
+    check_current,
     check_dt,
     check_method,
     check_params,
     izhikevich_init,
-    izhikevich_run,
     izhikevich_step,
 )
+from snn_torch.functional.izhikevich_fused import izhikevich_step_fused
 from snn_torch.functional.threshold import SpikeFn, fast_sigmoid
+from snn_torch.modules._validate import check_input, check_state, neuron_parameters
 
-__all__ = ["IzhikevichCell", "Izhikevich"]
+__all__ = ["IzhikevichCell", "Izhikevich", "stack_states"]
+
+
+def stack_states(states: list, cls: type) -> object:
+    """``[state_0, ..., state_{T-1}]`` -> one ``cls`` whose fields are ``[T, ...]`` tensors."""
+    return cls(*(torch.stack(field) for field in zip(*states, strict=True)))
 
 
 class _IzhikevichBase(nn.Module):
@@ -39,39 +52,63 @@ class _IzhikevichBase(nn.Module):
         spike_fn: SpikeFn | None,
         substep_reset: bool,
         v0_mv: float,
+        learn_params: bool | tuple[str, ...] | list[str],
+        validate: bool,
+        fused: bool,
+        device: torch.device | str | None = None,
+        dtype: torch.dtype | None = None,
     ) -> None:
         super().__init__()
-        self.p = check_params(p)
+        neuron_parameters(self, check_params(p), learn_params, device=device, dtype=dtype)
         self.dt_ms = check_dt(dt_ms)
         self.method = method
         self.spike_fn = spike_fn if spike_fn is not None else fast_sigmoid()
         self.substep_reset = substep_reset
         self.v0_mv = float(v0_mv)
+        self.validate = bool(validate)
+        self.fused = bool(fused)
         check_method(method)  # fail at construction, not at the first forward
+
+    @property
+    def p(self) -> IzhikevichParams:
+        """The parameters as an ``IzhikevichParams`` of tensors (the registered ``nn.Parameter`` s)."""
+        return IzhikevichParams(self.a, self.b, self.c, self.d, self.v_peak)
+
+    def params_as(self, dtype: torch.dtype) -> IzhikevichParams:
+        return IzhikevichParams(*(t if t.dtype == dtype else t.to(dtype) for t in self.p))
 
     def initial_state(self, like: Tensor) -> IzhikevichState:
         """Start state shaped, typed and placed like ``like`` (``v = v0_mv``, ``u = b v``)."""
-        return izhikevich_init(like.shape, self.p, v0_mv=self.v0_mv, device=like.device, dtype=like.dtype)
+        return izhikevich_init(like.shape, self.params_as(like.dtype), v0_mv=self.v0_mv, device=like.device,
+                               dtype=like.dtype)
+
+    def _step_fn(self) -> Callable[..., tuple[Tensor, IzhikevichState]]:
+        return izhikevich_step_fused if self.fused else izhikevich_step
 
     def _kwargs(self) -> dict:
         return dict(dt_ms=self.dt_ms, method=self.method, spike_fn=self.spike_fn,
                     substep_reset=self.substep_reset)
 
     def extra_repr(self) -> str:
-        return f"p={tuple(self.p)}, dt_ms={self.dt_ms}, method={self.method!r}, spike_fn={self.spike_fn.__name__}"
+        values = ", ".join(f"{k}={v.item():g}" if v.dim() == 0 else f"{k}=[{v.numel()}]"
+                           for k, v in self.p._asdict().items())
+        return (f"{values}, dt_ms={self.dt_ms}, method={self.method!r}, "
+                f"spike_fn={getattr(self.spike_fn, '__name__', self.spike_fn)}")
 
 
 class IzhikevichCell(_IzhikevichBase):
     """One integration step of Izhikevich neurons: ``forward(i_in, state) -> (z, state)``.
 
     Args:
-        p: neuron parameters (default: Qiu et al.'s, a=0.02 b=0.2 c=-50 mV d=2).
+        p: neuron parameters (default: Qiu et al.'s, a=0.02/ms b=0.2/ms c=-50 mV d=2 mV/ms).
         dt_ms: step length (ms).
         method: ``"heun"`` or ``"euler"``.
         spike_fn: spike function; default ``fast_sigmoid()`` so gradients flow.
         substep_reset: reset at the interpolated crossing inside the step.
         v0_mv: initial membrane potential when no state is given (mV).
-        validate: check every input (shape, dtype, finite) on each call.
+        learn_params: ``True``, ``False`` or the names of the fields (``"a"``, ...) to learn.
+        validate: check every input (shape, dtype, finite) and the state on each call.
+        fused: use ``izhikevich_step_fused`` (same results, one autograd node per step).
 
     Example::
 
@@ -90,29 +127,45 @@ class IzhikevichCell(_IzhikevichBase):
         spike_fn: SpikeFn | None = None,
         substep_reset: bool = True,
         v0_mv: float = DEFAULT_V0_MV,
+        learn_params: bool | tuple[str, ...] | list[str] = False,
         validate: bool = True,
+        fused: bool = True,
+        device: torch.device | str | None = None,
+        dtype: torch.dtype | None = None,
     ) -> None:
-        super().__init__(p, dt_ms=dt_ms, method=method, spike_fn=spike_fn,
-                         substep_reset=substep_reset, v0_mv=v0_mv)
-        self.validate = validate
+        super().__init__(p, dt_ms=dt_ms, method=method, spike_fn=spike_fn, substep_reset=substep_reset,
+                         v0_mv=v0_mv, learn_params=learn_params, validate=validate, fused=fused,
+                         device=device, dtype=dtype)
 
     def forward(self, i_in: Tensor, state: IzhikevichState | None = None) -> tuple[Tensor, IzhikevichState]:
         if state is None:
+            if self.validate and not isinstance(i_in, Tensor):
+                raise ValueError(f"i_in must be a torch.Tensor, got {type(i_in).__name__}")
             state = self.initial_state(i_in)
-        return izhikevich_step(i_in, state, self.p, validate=self.validate, **self._kwargs())
+        elif self.validate:
+            check_state(state, IzhikevichState, None, i_in)
+        if self.validate:
+            check_current("i_in", i_in, state.v, check_finite=not torch.compiler.is_compiling())
+        return self._step_fn()(i_in, state, self.params_as(state.v.dtype), validate=False, **self._kwargs())
 
 
 class Izhikevich(_IzhikevichBase):
     """A layer of Izhikevich neurons over time, driven through dense input weights.
 
-    ``forward(x, state)`` takes ``x`` of shape ``[T, ..., in_features]`` (time first), feeds
-    ``current = linear(x)`` (mV/ms) to ``out_features`` neurons for ``T`` steps of
-    ``dt_ms``, and returns ``(spikes [T, ..., out_features], final_state)``. ``T`` steps in one
-    call equal ``T`` one-step calls carrying the state, bit for bit.
+    ``forward(x, state)`` takes ``x`` of shape ``[T, ..., in_features]`` (time first; with
+    ``batch_first=True``, ``[B, T, ..., in_features]``), feeds ``current = linear(x)`` (mV/ms) to
+    ``out_features`` neurons for ``T`` steps of ``dt_ms``, and returns
+    ``(spikes [T, ..., out_features], final_state)``. ``T`` steps in one call equal ``T``
+    one-step calls carrying the state, bit for bit.
+
+    With ``record_states=True`` the second value is every step's state, an ``IzhikevichState``
+    of ``[T, ..., out_features]`` tensors (the final state is its ``[-1]``).
 
     Args:
         in_features, out_features: sizes of the input and of the neuron layer.
         bias: whether the input projection has a bias (a learned background current).
+        batch_first: ``x`` and the spikes are ``[B, T, ...]``; the state stays ``[B, ..., N]``.
+        record_states: return every step's state instead of the final one.
         Others as ``IzhikevichCell``.
     """
 
@@ -128,20 +181,51 @@ class Izhikevich(_IzhikevichBase):
         spike_fn: SpikeFn | None = None,
         substep_reset: bool = True,
         v0_mv: float = DEFAULT_V0_MV,
+        learn_params: bool | tuple[str, ...] | list[str] = False,
+        batch_first: bool = False,
+        record_states: bool = False,
+        validate: bool = True,
+        fused: bool = True,
         device: torch.device | str | None = None,
         dtype: torch.dtype | None = None,
     ) -> None:
-        super().__init__(p, dt_ms=dt_ms, method=method, spike_fn=spike_fn,
-                         substep_reset=substep_reset, v0_mv=v0_mv)
+        super().__init__(p, dt_ms=dt_ms, method=method, spike_fn=spike_fn, substep_reset=substep_reset,
+                         v0_mv=v0_mv, learn_params=learn_params, validate=validate, fused=fused,
+                         device=device, dtype=dtype)
         self.linear = nn.Linear(in_features, out_features, bias=bias, device=device, dtype=dtype)
+        self.batch_first = bool(batch_first)
+        self.record_states = bool(record_states)
 
     def forward(self, x: Tensor, state: IzhikevichState | None = None) -> tuple[Tensor, IzhikevichState]:
-        if not isinstance(x, Tensor) or x.dim() < 2 or x.shape[-1] != self.linear.in_features:
-            shape = tuple(x.shape) if isinstance(x, Tensor) else type(x).__name__
-            raise ValueError(f"x must be [T, ..., {self.linear.in_features}] (time first), got {shape}")
-        if not bool(torch.isfinite(x).all()):
-            raise ValueError("x holds NaN or inf")
+        if self.validate:
+            layout = "[B, T, ..., {}]" if self.batch_first else "[T, ..., {}]"
+            check_input("x", x, min_dim=2, features=self.linear.in_features, dtype=self.linear.weight.dtype,
+                        layout=layout.format(self.linear.in_features) + (" (batch first)" if self.batch_first
+                                                                          else " (time first)"))
+        if self.batch_first:
+            x = x.transpose(0, 1)
         current = self.linear(x)
         if state is None:
             state = self.initial_state(current[0])
-        return izhikevich_run(current, state, self.p, validate=True, **self._kwargs())
+        elif self.validate:
+            check_state(state, IzhikevichState, current.shape[1:], current)
+        p = self.params_as(current.dtype)
+        step, kwargs = self._step_fn(), self._kwargs()
+        spikes, states = [], []
+        # unbind: one backward node for all steps (T selects would each zero-fill a [T, ...] gradient)
+        for i_t in current.unbind(0):
+            z, state = step(i_t, state, p, validate=False, **kwargs)
+            spikes.append(z)
+            if self.record_states:
+                states.append(state)
+        if spikes:
+            out = torch.stack(spikes)
+        else:
+            out = current.new_zeros(current.shape)
+        if self.batch_first:
+            out = out.transpose(0, 1)
+        if self.record_states:
+            if not states:
+                return out, IzhikevichState(current.new_zeros(current.shape), current.new_zeros(current.shape))
+            return out, stack_states(states, IzhikevichState)
+        return out, state
