@@ -5,13 +5,15 @@ from __future__ import annotations
 import hashlib
 import io
 import os
+import re
 import tempfile
 from pathlib import Path
 from typing import Any
 
 import torch
 
-__all__ = ["CheckpointError", "atomic_write_bytes", "atomic_torch_save", "load_checkpoint_dict",
+__all__ = ["CheckpointError", "atomic_write_bytes", "atomic_torch_save", "load_checkpoint_dict", "clean_stale_temps",
+           "file_mode",
            "CHECKPOINT_FORMAT", "CHECKPOINT_VERSION"]
 
 CHECKPOINT_FORMAT = "snn-neat-checkpoint"
@@ -26,12 +28,50 @@ class CheckpointError(ValueError):
     """A checkpoint or genome file is missing, truncated, corrupted or of another format."""
 
 
+def current_umask() -> int:
+    """The process's umask, read without changing it where Linux shows it (``os.umask`` sets
+    it, and a thread creating a file meanwhile would get the wrong mode)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def file_mode() -> int:
+    """The mode an ordinary new file gets (0o666 less the umask); ``mkstemp`` makes 0o600."""
+    return 0o666 & ~current_umask()
+
+
+# Temp names: mkstemp's ``.NAME.`` + 8 characters of [a-z0-9_] + ``.tmp`` (this module) or
+# ``.png`` (``snn_torch.plots.save_figure``).
+_TEMP_NAME = re.compile(r"^\..+\.[a-z0-9_]{8}\.(tmp|png)$")
+
+
+def clean_stale_temps(folder: str | os.PathLike) -> list[Path]:
+    """Remove the temp files interrupted atomic writes left anywhere under ``folder`` (a killed
+    process cannot remove its own). Only safe while no other process writes there: call it
+    holding the folder's lock. Returns the paths removed."""
+    removed = []
+    for path in Path(folder).rglob(".*"):
+        if _TEMP_NAME.match(path.name) and path.is_file() and not path.is_symlink():
+            path.unlink(missing_ok=True)
+            removed.append(path)
+    return removed
+
+
 def _atomic(path: str | os.PathLike, write) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
+            os.fchmod(fh.fileno(), file_mode())  # as open() would have made it, not mkstemp's 0o600
             write(fh)
             fh.flush()
             os.fsync(fh.fileno())

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import os
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -23,11 +25,14 @@ def _positive_float(text: str) -> float:
 
 
 def _cmd_figures(args: argparse.Namespace) -> int:
+    _check_out(args.out)
+    from evolution.checkpoint import file_mode
     from snn_torch.plots import save_neuron_figures
 
     start = time.perf_counter()
     paths = save_neuron_figures(args.out, dt_ms=args.dt_ms)
     for path in paths:
+        os.chmod(path, file_mode())  # written through mkstemp (0o600): give them the umask's mode
         print(f"wrote {path}")
     print(f"done in {time.perf_counter() - start:.1f} s")
     return 0
@@ -53,13 +58,100 @@ _positive_int = _int_at_least(1)
 _non_negative_int = _int_at_least(0)
 
 
-def _cmd_xor(args: argparse.Namespace) -> int:
-    from tasks.experiments.xor import run_xor, write_xor_report
+class CommandError(SystemExit):
+    """A user error: ``main`` has printed it as one line; the exit status is 2. ``str()`` is the line."""
 
-    seeds = list(range(args.seed, args.seed + args.runs))
-    summary = run_xor(seeds, generations=args.generations, device=args.device)
-    for path in write_xor_report(summary, args.out):
-        print(f"wrote {path}")
+    def __init__(self, line: str) -> None:
+        super().__init__(2)
+        self.line = line
+
+    def __str__(self) -> str:
+        return self.line
+
+
+class UsageError(Exception):
+    """Bad input that the options' parsers could not see (the message names the option)."""
+
+
+SEED_LIMIT = 2**63  # evolution.rng keys a run by a 64-bit signed hash of its seed
+
+
+def _check_out(out: str) -> Path:
+    """``--out`` as a folder this process can write (created if missing), before any work."""
+    if not out.strip():
+        raise UsageError("--out is empty: name an output folder, e.g. --out results/run1")
+    path = Path(out)
+    if path.exists() and not path.is_dir():
+        raise UsageError(f"--out {out!r} is a file, not a folder: choose a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"--out {out!r} cannot be created ({exc.strerror}): choose a folder you can write") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise UsageError(f"--out {out!r} is not writable: choose a folder you can write")
+    return path
+
+
+def _check_device(text: str) -> str:
+    """``--device`` as a torch device that exists here (cpu, cuda, cuda:N)."""
+    import torch
+
+    try:
+        device = torch.device(text)
+    except (RuntimeError, ValueError):
+        raise UsageError(f"--device {text!r} is not a device name: use cpu or cuda (cuda:N)") from None
+    if device.type not in ("cpu", "cuda"):
+        raise UsageError(f"--device {text!r}: snn-neat runs on cpu or cuda (cuda:N), not {device.type}")
+    try:
+        torch.empty(1, device=device)
+    except Exception as exc:  # noqa: BLE001 - torch raises AssertionError (no CUDA build), RuntimeError, ...
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise UsageError(f"--device {text!r} is not available here ({reason}): use --device cpu") from None
+    return text
+
+
+def _check_threads(threads: int | None) -> None:
+    """``--threads``: at most 4 per CPU (OpenMP crashes creating 100,000), then set."""
+    if threads is None:
+        return
+    limit = 4 * (os.cpu_count() or 1)
+    if threads > limit:
+        raise UsageError(f"--threads {threads} is more than 4 per CPU of this machine ({os.cpu_count()} CPUs): "
+                         f"use at most {limit}")
+    import torch
+
+    torch.set_num_threads(threads)
+
+
+def _check_seeds(first: int, runs: int = 1) -> list[int]:
+    last = first + runs - 1
+    if last >= SEED_LIMIT:
+        what = f"--seed {first}" + (f" with --runs {runs} reaches seed {last}" if runs > 1 else "")
+        raise UsageError(f"{what}; seeds must be below 2**63 = {SEED_LIMIT}: choose a smaller --seed")
+    return list(range(first, last + 1))
+
+
+def _prepare(args: argparse.Namespace) -> list[int]:
+    """Check every option that needs this machine, before any work; returns the seeds."""
+    seeds = _check_seeds(args.seed, getattr(args, "runs", 1))
+    _check_device(args.device)
+    _check_threads(args.threads)
+    _check_out(args.out)
+    return seeds
+
+
+def _cmd_xor(args: argparse.Namespace) -> int:
+    seeds = _prepare(args)
+    from evolution.checkpoint import clean_stale_temps
+    from tasks.experiments.xor import run_xor, write_xor_report
+    from tasks.lock import OutputLock
+
+    with OutputLock(args.out, _command_line(args)):
+        clean_stale_temps(args.out)
+        summary = run_xor(seeds, generations=args.generations, device=args.device, out=args.out, resume=args.resume,
+                          checkpoint_every=args.checkpoint_every, progress=not args.quiet)
+        for path in write_xor_report(summary, args.out):
+            print(f"wrote {path}")
     t = summary.table()
     print(f"{t['runs']} runs (seeds {seeds[0]}..{seeds[-1]}): {t['failures']} failures, mean "
           f"{t['mean_generations']:.2f} generations, median {t['median_generations']}, mean hidden nodes "
@@ -68,40 +160,20 @@ def _cmd_xor(args: argparse.Namespace) -> int:
 
 
 def _cmd_evolve(args: argparse.Namespace) -> int:
-    import torch
+    _prepare(args)
+    from evolution.checkpoint import clean_stale_temps
+    from tasks.experiments.evolve import run_evolve, write_evolve_report
+    from tasks.lock import OutputLock
 
-    from evolution.genome_io import save_genome
-    from evolution.neat import NEAT
-    from evolution.reporters import StatisticsReporter, StdOutReporter, TqdmReporter
-    from tasks.experiments.cartpole import (
-        controller_config,
-        ga_choice,
-        markov_config,
-        markov_fitness,
-        nonmarkov_fitness,
-    )
-
-    try:
-        device = torch.device(args.device)
-        torch.empty(0, device=device)
-    except (RuntimeError, AssertionError) as exc:
-        raise SystemExit(f"snn-neat evolve: error: --device {args.device!r} is not available ({exc})") from None
-    preset, extra = ga_choice("table1" if args.task == "markov" else "table2", args.controller, args.ga)
-    if args.task == "markov":
-        config = markov_config(args.controller, self_loops=args.self_loops, ga=preset, **extra)
-        fitness = markov_fitness(args.controller, config)
-    else:
-        config = controller_config(args.controller, self_loops=args.self_loops, ga=preset, **extra)
-        fitness = nonmarkov_fitness(args.controller, config)
-    neat = NEAT(config, seeds=[args.seed], device=device)
-    stats = neat.add_reporter(StatisticsReporter())
-    neat.add_reporter(StdOutReporter(every=args.report_every) if args.verbose else TqdmReporter(total=args.generations))
-    result = neat.run(fitness, args.generations)
     out = args.out
-    stats.save_csv(f"{out}/statistics.csv")
-    save_genome(f"{out}/champion.json", result.best_genomes, config, fitness=result.best_fitness[0].item())
-    solved = result.solved_generation[0].item()
-    print(f"{args.controller} seed {args.seed}: best fitness {result.best_fitness[0].item():.0f} steps; "
+    with OutputLock(out, _command_line(args)):
+        clean_stale_temps(out)
+        r = run_evolve(args.controller, args.task, args.seed, args.generations, out, resume=args.resume,
+                       self_loops=args.self_loops, ga=args.ga, device=args.device, verbose=args.verbose,
+                       report_every=args.report_every, checkpoint_every=args.checkpoint_every)
+        write_evolve_report(r, out)
+    solved = r.result.solved_generation[0].item()
+    print(f"{args.controller} seed {args.seed}: best fitness {r.result.best_fitness[0].item():.0f} steps; "
           + (f"solved at generation {solved}" if solved > 0 else f"not solved in {args.generations} generations")
           + f"; wrote {out}/statistics.csv and {out}/champion.json")
     return 0
@@ -115,23 +187,31 @@ def _controllers(text: str) -> list[str]:
     return names
 
 
+def _reproduce_checkpoints(args: argparse.Namespace) -> list[Path]:
+    """The checkpoints (or Ray shard manifests) of this reproduction already in ``--out``."""
+    from tasks.experiments.distributed import has_shards
+
+    out = Path(args.out)
+    return [out / f"{c}.ckpt" if (out / f"{c}.ckpt").exists() else out / "shards" / f"{c}.json"
+            for c in args.controllers if (out / f"{c}.ckpt").exists() or has_shards(out, c)]
+
+
 def _cmd_reproduce(args: argparse.Namespace) -> int:
-    import shlex
-
-    import torch
-
+    seeds = _prepare(args)
+    from evolution.checkpoint import clean_stale_temps
     from tasks.experiments.distributed import has_shards, run_controller_sharded, run_controllers_on_ray
-    from tasks.experiments.reproduce import ReproduceError, run_controller, write_report
+    from tasks.experiments.reproduce import run_controller, write_report
+    from tasks.lock import OutputLock
 
-    if args.threads is not None:
-        torch.set_num_threads(args.threads)
-    seeds = list(range(args.seed, args.seed + args.runs))
-    command = "snn-neat " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["reproduce"] else (
-        f"snn-neat reproduce {args.table} --runs {args.runs} --seed {args.seed} --out {args.out}")
+    command = _command_line(args)
     results = {}
     common = dict(resume=args.resume, self_loops=args.self_loops, ga=args.ga, checkpoint_every=args.checkpoint_every,
                   device=args.device, progress=not args.quiet)
-    try:
+    with OutputLock(args.out, command):
+        clean_stale_temps(args.out)
+        if args.resume and not _reproduce_checkpoints(args):
+            raise UsageError(f"--resume: --out {args.out!r} holds no checkpoint of this reproduction "
+                             f"({', '.join(c + '.ckpt' for c in args.controllers)}): run without --resume to start")
         if args.ray is not None:
             results = run_controllers_on_ray(args.table, args.controllers, seeds, args.generations, args.out,
                                              address=args.ray, shards=args.shards, **common)
@@ -142,18 +222,57 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
                                                         shards=args.shards, **common)
                 else:
                     results[c] = run_controller(args.table, c, seeds, args.generations, args.out, **common)
-    except ReproduceError as exc:
-        raise SystemExit(f"snn-neat reproduce: error: {exc}") from None
-    for path in write_report(results, args.table, args.out, command=command, generalization=not args.no_generalization):
-        if path.suffix != ".json" or path.parent.name != "champions":
-            print(f"wrote {path}")
+        for path in write_report(results, args.table, args.out, command=command,
+                                 generalization=not args.no_generalization):
+            if path.suffix != ".json" or path.parent.name != "champions":
+                print(f"wrote {path}")
     print((Path(args.out) / f"{args.table}.md").read_text())
     return 0
 
 
+def _command_line(args: argparse.Namespace, *, resume: bool = False) -> str:
+    """The command as typed (``args.argv``), with ``--resume`` added if asked."""
+    argv = list(args.argv)
+    if args.command == "reproduce" and "--out" not in argv and not any(a.startswith("--out=") for a in argv):
+        argv += ["--out", args.out]  # the default folder, named: a resume must find it
+    if resume and "--resume" not in argv:
+        argv.append("--resume")
+    return "snn-neat " + shlex.join(argv)
+
+
+def _resume_hint(args: argparse.Namespace) -> str:
+    """What to type after an interruption: the resume command where a checkpoint exists."""
+    if args.command == "figures":
+        return "run it again to redo the figures"
+    out = Path(args.out)
+    if args.command == "reproduce":
+        kept = bool(_reproduce_checkpoints(args))
+    else:
+        kept = (out / ("xor.ckpt" if args.command == "xor" else "evolve.ckpt")).exists()
+    if kept:
+        return f"the last checkpoint is kept; continue with: {_command_line(args, resume=True)}"
+    return f"no checkpoint was written yet; start again with: {_command_line(args)}".replace(" --resume", "")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse's errors as one line (usage is a --help away), exit status 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _add_run_options(p: argparse.ArgumentParser) -> None:
+    """--resume, --checkpoint-every and --threads, as ``reproduce`` has them."""
+    p.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out")
+    p.add_argument("--checkpoint-every", type=_positive_int, default=1, help="generations between checkpoints")
+    p.add_argument("--threads", type=_positive_int, default=None, help="torch threads (default: torch's)")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="snn-neat", description="Evolving spiking neural networks in PyTorch.")
+    parser = _Parser(
+        prog="snn-neat", description="Evolving spiking neural networks in PyTorch.",
+        epilog="Exit status: 0 done, 2 a user error (one line on stderr saying what to change), 130 interrupted "
+               "(Ctrl-C; the line names the command that resumes).")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     fig = sub.add_parser(
         "figures", help="regenerate the paper's neuron figures (Fig. 1 and Fig. 2) as PNG",
@@ -173,6 +292,8 @@ def build_parser() -> argparse.ArgumentParser:
     xor.add_argument("--generations", type=_positive_int, default=100, help="budget per run (default: 100)")
     xor.add_argument("--device", default="cpu", help="torch device (default: cpu)")
     xor.add_argument("--out", default="results/xor", help="output folder (default: results/xor)")
+    _add_run_options(xor)
+    xor.add_argument("--quiet", action="store_true", help="no progress bar")
     xor.set_defaults(func=_cmd_xor)
 
     evo = sub.add_parser(
@@ -194,6 +315,7 @@ def build_parser() -> argparse.ArgumentParser:
     evo.add_argument("--out", default="results/evolve", help="output folder (default: results/evolve)")
     evo.add_argument("--verbose", action="store_true", help="a line per generation instead of a progress bar")
     evo.add_argument("--report-every", type=_positive_int, default=1, help="with --verbose: every N generations")
+    _add_run_options(evo)
     evo.set_defaults(func=_cmd_evolve)
 
     rep = sub.add_parser(
@@ -233,10 +355,43 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run a command. User errors print one line and raise ``CommandError`` (exit status 2);
+    Ctrl-C prints how to resume and exits with 130."""
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
+    args.argv = argv
     if getattr(args, "command", None) == "reproduce" and args.out is None:
         args.out = f"results/{args.table}"
-    return args.func(args)
+    prog = f"snn-neat {args.command}"
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        print(f"\n{prog}: interrupted; {_resume_hint(args)}", file=sys.stderr, flush=True)
+        raise SystemExit(130) from None
+    except CommandError:
+        raise
+    except Exception as exc:
+        message = _user_error(exc)
+        if message is None:
+            raise
+        line = f"{prog}: error: {message}"
+        print(line, file=sys.stderr, flush=True)
+        raise CommandError(line) from None
+
+
+def _user_error(exc: Exception) -> str | None:
+    """The one-line message for an error the user can fix, or None for a bug (its traceback shows)."""
+    from evolution.checkpoint import CheckpointError
+    from evolution.config import ConfigError
+    from tasks.experiments.reproduce import ReproduceError
+    from tasks.lock import LockError
+
+    if isinstance(exc, (UsageError, ReproduceError, CheckpointError, ConfigError, LockError)):
+        return " ".join(str(exc).split("\n"))
+    if isinstance(exc, OSError):  # a full disk, a folder made read-only meanwhile, ...
+        where = f" {exc.filename}" if exc.filename else ""
+        return f"cannot write{where}: {exc.strerror or exc}; free space or choose another --out"
+    return None
 
 
 if __name__ == "__main__":

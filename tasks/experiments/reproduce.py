@@ -70,6 +70,9 @@ def _tasks() -> dict[str, Task]:
 
 
 TASKS = ("table1", "table2")
+# Fig. 8 draws solved runs' final best up to the budget, or this many generations where the
+# budget is larger (evolution itself may go on longer; its generations are all drawn).
+FIG8_MAX_PAD = 10_000
 
 
 @dataclass
@@ -186,9 +189,11 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
     if stop_after is None and history and (neat.generation >= generations or not bool(neat.active_runs.any())):
         save()
     hist = torch.stack(history) if history else torch.zeros(0, len(seeds), dtype=torch.float64)
-    # Runs that solved early keep their final best for the rest of the budget (Fig. 8).
-    if 0 < hist.shape[0] < generations:
-        hist = torch.cat([hist, hist[-1:].expand(generations - hist.shape[0], -1)])
+    # Runs that solved early keep their final best for the rest of the budget (Fig. 8), drawn
+    # up to FIG8_MAX_PAD generations: a budget of 10**12 cannot be padded (nor plotted).
+    pad_to = min(generations, max(hist.shape[0], FIG8_MAX_PAD))
+    if 0 < hist.shape[0] < pad_to:
+        hist = torch.cat([hist, hist[-1:].expand(pad_to - hist.shape[0], -1)])
     return ControllerRuns(controller=controller, seeds=list(seeds), generations=generations,
                           solved_generation=neat.solved_generation.cpu().tolist(),
                           best_fitness=neat.best_fitness.cpu().tolist(), history=hist,
@@ -280,20 +285,35 @@ def _generalization(r: ControllerRuns) -> list[float]:
     return rate[:, 0].tolist()
 
 
+def _save_png(fig, path: Path) -> Path:
+    """``fig`` as PNG (150 dpi), written atomically with the umask's mode."""
+    import io
+
+    from evolution.checkpoint import atomic_write_bytes
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=150)
+    return atomic_write_bytes(path, buf.getvalue())
+
+
 def write_report(results: dict[str, ControllerRuns], table: str, out: str | os.PathLike, *, command: str,
                  generalization: bool = True) -> list[Path]:
     """Write the table (Markdown, CSV), per-run CSV, summary JSON, Fig. 8, an example
-    trajectory and topology per controller, and every champion genome. Returns the paths."""
+    trajectory and topology per controller, and every champion genome. Returns the paths.
+
+    ``summary.json`` and then ``TABLE.md`` are written last, and removed first: a report
+    interrupted part way has no ``TABLE.md``, so one that has it is complete."""
     import csv
     import io
     import json
 
     from evolution.checkpoint import atomic_write_bytes
     from evolution.genome_io import save_genome
-    from snn_torch.plots import save_figure
     from tasks.plots import plot_best_fitness_mean_std, plot_episode, plot_topology, plot_trajectory
 
     out = Path(out)
+    for last in (out / f"{table}.md", out / "summary.json"):
+        last.unlink(missing_ok=True)
     written: list[Path] = []
     summary = summarize(results, table)
     seeds = next(iter(results.values())).seeds
@@ -315,7 +335,6 @@ def write_report(results: dict[str, ControllerRuns], table: str, out: str | os.P
         for c, row in summary["rows"].items():
             md += (f"| {LABELS.get(c, c)} | {row['generalization_mean']:.3f} | {row['generalization_median']:.3f} | "
                    f"{row['generalization_solved_mean']:.3f} |\n")
-    written.append(atomic_write_bytes(out / f"{table}.md", md.encode()))
 
     buf = io.StringIO()
     fields = ["controller", "source", "best", "worst", "median", "mean", "failures", "runs", "wall_s"]
@@ -339,12 +358,11 @@ def write_report(results: dict[str, ControllerRuns], table: str, out: str | os.P
             w.writerow([c, i, seed, r.solved_generation[i], r.counted()[i], r.best_fitness[i], int(hidden[i]),
                         int(conns[i]), gen[i]])
     written.append(atomic_write_bytes(out / "runs.csv", buf.getvalue().encode()))
-    written.append(atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2, default=float).encode()))
 
     target = float(next(iter(results.values())).config.fitness_threshold)
     fig = plot_best_fitness_mean_std({LABELS.get(c, c): r.history.T for c, r in results.items()}, max_fitness=target,
                                      title=f"Best fitness per generation over {len(seeds)} runs (Fig. 8)")
-    written.append(save_figure(fig, out / "fig8_best_fitness.png"))
+    written.append(_save_png(fig, out / "fig8_best_fitness.png"))
     for c, r in results.items():
         run = _example_run(r)
         label = f"{LABELS.get(c, c)}, seed {r.seeds[run]}" + (
@@ -359,11 +377,13 @@ def write_report(results: dict[str, ControllerRuns], table: str, out: str | os.P
             fig = plot_episode(tr["activity"], tr["x"], tr["theta"], tr["force"], tau_s=tau, names=names, title=label)
         else:
             fig = plot_trajectory(tr["x"], tr["theta"], tr["force"], tau_s=tau, title=label)
-        written.append(save_figure(fig, out / f"trajectory_{c}.png"))
+        written.append(_save_png(fig, out / f"trajectory_{c}.png"))
         names = {**inputs, r.config.first_output: "F"}
-        written.append(save_figure(plot_topology(r.champions, r.config, run, 0, labels=names,
-                                                 title=f"Champion topology: {label}"), out / f"topology_{c}.png"))
+        written.append(_save_png(plot_topology(r.champions, r.config, run, 0, labels=names,
+                                               title=f"Champion topology: {label}"), out / f"topology_{c}.png"))
         for i, seed in enumerate(r.seeds):
             written.append(save_genome(out / "champions" / f"{c}_seed{seed}.json", r.champions.select_runs([i]),
                                        r.config, fitness=r.best_fitness[i]))
+    written.append(atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2, default=float).encode()))
+    written.append(atomic_write_bytes(out / f"{table}.md", md.encode()))  # last: the report is complete
     return written

@@ -59,26 +59,47 @@ class XorSummary:
 
 
 def run_xor(seeds: list[int], *, generations: int = 100, config: NEATConfig = XOR_CONFIG,
-            device: str = "cpu", progress: bool = True) -> XorSummary:
-    """Evolve XOR once per seed, all runs in one batch."""
+            device: str = "cpu", progress: bool = True, out: str | Path | None = None, resume: bool = False,
+            checkpoint_every: int = 1) -> XorSummary:
+    """Evolve XOR once per seed, all runs in one batch.
+
+    With ``out``, the run is checkpointed to ``OUT/xor.ckpt`` (``tasks.experiments.resumable``)
+    and ``resume`` continues it; the result is the same bits either way."""
+    from tasks.experiments.resumable import RunCheckpoint, open_run
+
     start = time.perf_counter()
-    neat = NEAT(config, seeds=seeds, device=device)
-    if progress:
-        neat.add_reporter(TqdmReporter(total=generations))
-    result = neat.run(lambda g: xor_fitness(g, config), generations,
-                      solved_fn=lambda g, f: xor_solved(g, config))
+    checkpoint = None
+    neat = NEAT(config, seeds=seeds, device=device) if out is None else None
+    if out is not None:
+        identity = {"command": "xor", "seeds": list(seeds), "generations": generations, "config": config.to_dict()}
+        path = Path(out) / "xor.ckpt"
+        neat, data = open_run(path, identity, resume=resume, device=device,
+                              fresh=lambda: NEAT(config, seeds=seeds, device=device))
+        checkpoint = RunCheckpoint(path, identity, generations, every=checkpoint_every,
+                                   wall_s=float(data.get("wall_s", 0.0)))
+    bar = neat.add_reporter(TqdmReporter(total=generations, initial=neat.generation)) if progress else None
+    if checkpoint is not None:
+        neat.add_reporter(checkpoint)
+    try:
+        result = neat.run(lambda g: xor_fitness(g, config), generations - neat.generation,
+                          solved_fn=lambda g, f: xor_solved(g, config))
+    finally:
+        if bar is not None:
+            bar.end_run(neat)  # closed now: a bar closed at exit would draw over an interruption's message
     hidden = result.best_genomes.num_hidden(config)[:, 0]
     solved = result.solved_generation
     return XorSummary(
         seeds=list(seeds), solved_generation=solved.tolist(),
         hidden_nodes=torch.where(solved >= 0, hidden, -1).tolist(),
-        generations=generations, wall_s=time.perf_counter() - start,
+        generations=generations, wall_s=checkpoint.wall_s if checkpoint else time.perf_counter() - start,
     )
 
 
 def write_xor_report(summary: XorSummary, out: str | Path) -> list[Path]:
-    """Write ``runs.csv`` (one row per seed), ``summary.json`` and ``summary.md``."""
+    """Write ``runs.csv`` (one row per seed), ``summary.json`` and ``summary.md``; ``summary.md``
+    last, and removed first, so that its presence marks a complete report."""
     out = Path(out)
+    (out / "summary.md").unlink(missing_ok=True)
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["seed", "solved_generation", "hidden_nodes"])

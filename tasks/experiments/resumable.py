@@ -1,0 +1,76 @@
+"""Checkpointed runs for ``snn-neat evolve`` and ``snn-neat xor``, resumed as ``reproduce`` resumes.
+
+``OUT/<name>.ckpt`` holds the NEAT state (RNG streams included), the command's identity (what
+it was asked to do) and its own records (statistics rows, wall time). It is written atomically
+every ``checkpoint_every`` generations and when the run ends, so a command killed at any point
+continues with ``--resume`` to the same bits as an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from evolution.checkpoint import atomic_torch_save, load_checkpoint_dict
+from evolution.neat import NEAT
+from evolution.reporters import BaseReporter
+from tasks.experiments.reproduce import ReproduceError
+
+__all__ = ["RunCheckpoint", "open_run"]
+
+
+def open_run(path: str | os.PathLike, identity: dict, *, resume: bool, device: str,
+             fresh: Callable[[], NEAT]) -> tuple[NEAT, dict]:
+    """The run to continue: ``path``'s (which needs ``resume``, and the same ``identity``) or
+    ``fresh()`` (which needs no ``resume``: a ``--resume`` with nothing to continue is an error,
+    not a silent new start). Returns ``(neat, checkpoint)`` (``{}`` for a fresh run)."""
+    path = Path(path)
+    if not path.exists():
+        if resume:
+            raise ReproduceError(f"--resume: there is no checkpoint {path} to continue; "
+                                 "run without --resume to start afresh")
+        return fresh(), {}
+    if not resume:
+        raise ReproduceError(f"{path} exists: pass --resume to continue it, or choose another --out")
+    data = load_checkpoint_dict(path, map_location="cpu")
+    saved = data.get("identity")
+    if not isinstance(saved, dict) or "neat" not in data:
+        raise ReproduceError(f"cannot resume {path}: it is not a checkpoint of `snn-neat {identity['command']}`")
+    for key, value in identity.items():
+        if saved.get(key) != value:
+            raise ReproduceError(f"cannot resume {path}: it was written with {key}={saved.get(key)!r}, "
+                                 f"this call asks for {key}={value!r}")
+    return NEAT.from_state_dict(data["neat"], device=device, name=str(path)), data
+
+
+class RunCheckpoint(BaseReporter):
+    """Writes ``path`` every ``every`` generations and when the run ends (its budget of
+    ``generations`` spent, or every run solved). ``records()`` adds the command's own entries;
+    add this reporter after those that fill them. ``wall_s``: seconds spent before this process."""
+
+    def __init__(self, path: str | os.PathLike, identity: dict, generations: int, *, every: int = 1,
+                 records: Callable[[], dict] = dict, wall_s: float = 0.0) -> None:
+        if every < 1:
+            raise ReproduceError(f"checkpoint_every must be >= 1, got {every}")
+        self.path, self.identity, self.generations, self.every = Path(path), identity, generations, every
+        self.records = records
+        self._wall0, self._start = wall_s, time.perf_counter()
+
+    @property
+    def wall_s(self) -> float:
+        """Seconds of evolution so far, over every process that worked on the run."""
+        return self._wall0 + time.perf_counter() - self._start
+
+    def finished(self, neat: NEAT) -> bool:
+        return neat.generation >= self.generations or not bool(neat.active_runs.any())
+
+    def end_generation(self, neat: NEAT) -> None:
+        if neat.generation % self.every == 0 or self.finished(neat):
+            self.save(neat)
+
+    def save(self, neat: NEAT) -> Path:
+        state = neat.state_dict()
+        return atomic_torch_save({"format": state["format"], "version": state["version"], "identity": self.identity,
+                                  "neat": state, "wall_s": self.wall_s, **self.records()}, self.path)
