@@ -41,7 +41,7 @@ from snn_torch.functional.izhikevich import (
     izhikevich_init,
     izhikevich_run,
 )
-from snn_torch.functional.network_kernel import check_network_index, rate_control_step_kernel
+from snn_torch.functional.network_kernel import RateControlKernel, check_network_index
 from snn_torch.functional.recurrent import RecurrentState
 from snn_torch.modules.coding import (
     BangBang,
@@ -284,7 +284,7 @@ class SpikingController(_Phenotype):
         self._w_out_c = self.w_out.contiguous()
         self._gain = spec.i_input_max if spec.encoder == "current" else self.encoder.p_max
         self._checked: Tensor | None = None  # the last row -> network index checked for the kernel
-        self._kernel_plan: tuple | None = None
+        self._kernel: _BoundKernel | None = None
 
     def initial_state(self, network: Tensor) -> SpikingState:
         network = self._check_network(network)
@@ -342,23 +342,40 @@ class SpikingController(_Phenotype):
         if network is not self._checked:  # once per batch of rows: the kernel reads weights by it
             check_network_index(network, B, self.num_genomes)
             self._checked = network
-        if not all(t.is_contiguous() for t in (*neurons, window.history)):
+        v, u, z = neurons
+        if not (v.is_contiguous() and u.is_contiguous() and z.is_contiguous() and window.history.is_contiguous()):
             neurons = RecurrentState(*(t.contiguous() for t in neurons))
             window = RateWindowState(window.history.contiguous(), window.steps)
-        plan = self._kernel_plan
-        if plan is None or plan[0].dtype != neurons.v.dtype:  # constants looked up once, not every step
-            net = self.network
-            plan = self._kernel_plan = (net.effective_weight(neurons.v.dtype), net.p, self.window.window,
-                                        self.window.period_s)
-        w_eff, p, W, period_s = plan
+        kernel = self._kernel
+        if kernel is None or kernel.dtype != neurons.v.dtype:  # constants bound once, not every step
+            kernel = self._kernel = _bind_kernel(self, neurons.v.dtype)
         steps = window.steps + 1
-        drive, counts = rate_control_step_kernel(
-            obs01, neurons, w_eff, p, dt_ms=self.spec.dt_ms, substeps=self.substeps, network=network,
-            gain=self._gain, iconst=self._iconst, keys=state.keys, base=window.steps * self.substeps * self.n_in,
-            history=window.history, slot=window.steps % W, rate_div=min(steps, W) * period_s, w_out=self._w_out_c,
-            rest=self.rest)
+        drive, counts = kernel.fn(obs01, neurons, network, state.keys, window.steps * kernel.draws_per_step,
+                                  window.history, window.steps % kernel.window,
+                                  min(steps, kernel.window) * kernel.period_s)
         window = RateWindowState(window.history, steps)
         return self._decode(drive, state.sigma), state._replace(neurons=neurons, window=window), counts
+
+
+class _BoundKernel(NamedTuple):
+    """A controller's ``RateControlKernel`` for one dtype, and the window's constants."""
+
+    fn: RateControlKernel
+    dtype: torch.dtype
+    window: int
+    period_s: float
+    draws_per_step: int  # Bernoulli counters per control step
+
+
+
+def _bind_kernel(controller: SpikingController, dtype: torch.dtype) -> _BoundKernel:
+    net, spec = controller.network, controller.spec
+    fn = RateControlKernel(net.effective_weight(dtype).contiguous(), net.p, dt_ms=spec.dt_ms,
+                           substeps=controller.substeps, gain=controller._gain, bernoulli=spec.encoder == "bernoulli",
+                           iconst=controller._iconst.to(dtype), w_out=controller._w_out_c.to(dtype),
+                           rest=None if controller.rest is None else controller.rest.to(dtype))
+    return _BoundKernel(fn, dtype, controller.window.window, controller.window.period_s,
+                        controller.substeps * controller.n_in)
 
 
 def _weighted_drive(rates: Tensor, w_out: Tensor, rest: Tensor | None) -> Tensor:

@@ -9,7 +9,7 @@ call per control step. It is generic: any number of nodes up to ``MAX_NODES``, a
 an index (several episodes per network, finished episodes compacted away without copying
 weights).
 
-``rate_control_step_kernel`` wraps it in a whole control step of a rate-coded controller
+``RateControlKernel`` wraps it in a whole control step of a rate-coded controller
 (encoder, network, rate window, weighted readout: ``evolution.SpikingController`` on the CPU),
 so a closed loop pays one C call per step instead of a dozen small tensor ops.
 
@@ -33,7 +33,7 @@ from snn_torch.functional.izhikevich import IzhikevichParams
 from snn_torch.functional.recurrent import RecurrentState
 
 __all__ = ["MAX_NODES", "kernel_available", "kernel_supports", "network_steps_kernel", "check_network_index",
-           "rate_control_step_kernel"]
+           "RateControlKernel"]
 
 MAX_NODES = 64  # lane buffers live on the stack
 _CSRC = Path(__file__).resolve().parent.parent / "csrc"
@@ -158,43 +158,64 @@ def network_steps_kernel(
     return counts, RecurrentState(v, u, z)
 
 
-def rate_control_step_kernel(
-    x: Tensor, state: RecurrentState, w_eff: Tensor, p: IzhikevichParams, *, dt_ms: float, substeps: int,
-    network: Tensor, gain: float, iconst: Tensor, keys: Tensor | None, base: int, history: Tensor, slot: int,
-    rate_div: float, w_out: Tensor, rest: Tensor | None,
-) -> tuple[Tensor, Tensor]:
+class RateControlKernel:
     """One control step of a rate-coded controller in one C call: encoder -> network steps ->
-    rate window -> weighted readout (``SpikingController.act`` on the CPU; its torch modules are
-    the definition, and this repeats their operations in order: the same bits, tested).
-
-    Trusted: the caller has checked shapes, dtypes, contiguity and the network indices (an index
-    outside ``w_eff`` would read outside its memory).
+    rate window -> weighted readout (``evolution.SpikingController.act`` on the CPU; its torch
+    modules are the definition, and this repeats their operations in order: the same bits,
+    tested). The constants are bound once, so a step costs one C call and two allocations.
 
     Args:
-        x: ``[B, S]`` observations normalised to [0, 1].
-        state: ``RecurrentState`` of ``[B, N]`` tensors, updated in place.
-        w_eff: effective weights ``[G, N, N]``; network: ``[B]`` int64, each row's network.
-        gain: current encoder (``keys`` None): input ``k`` gets ``gain * x_k + iconst[k]``
-            (mV/ms); Bernoulli encoder: spike probability ``x_k * gain`` per substep, drawn
-            from streams ``keys [B]`` from counter ``base``.
+        w_eff: effective weights ``[G, N, N]`` (masked, kick-scaled; mV/ms per spike).
+        p: scalar neuron parameters; dt_ms: substep (ms); substeps: substeps per control step.
+        gain: current encoder (``bernoulli`` False): input ``k`` gets ``gain * x_k + iconst[k]``
+            (mV/ms); Bernoulli encoder: input ``k`` spikes with probability ``x_k * gain`` per
+            substep (drawn from each row's stream, ``BernoulliSources``' counters).
         iconst: ``[N]`` constant current of every node (background, bias nodes), mV/ms.
-        history: the rate window ``[W, B, N]``, updated in place at ``slot``; rate_div: the
-            window's length (s), rates = spikes / rate_div (Hz).
         w_out: ``[G, N, K]`` readout weights; rest: ``[N]`` rates subtracted first (Hz), or None.
 
-    Returns:
-        ``(drive [B, K], counts [B, N])``.
+    Every tensor must be contiguous, on the CPU, of one dtype (float32 or float64), N <= 64.
     """
-    v, u, z = state
-    B, N = v.shape
-    K = w_out.shape[-1]
-    counts = torch.empty_like(v)
-    drive = torch.empty((B, K), dtype=v.dtype, device=v.device)
-    lib = _library()
-    fn = lib.izh_rate_control_step_f32 if v.dtype == torch.float32 else lib.izh_rate_control_step_f64
-    fn(v.data_ptr(), u.data_ptr(), z.data_ptr(), counts.data_ptr(), w_eff.data_ptr(), network.data_ptr(),
-       x.data_ptr(), x.shape[1], gain, iconst.data_ptr(), None if keys is None else keys.data_ptr(), base,
-       history.data_ptr(), history.shape[0], slot, rate_div, w_out.data_ptr(), K,
-       None if rest is None else rest.data_ptr(), drive.data_ptr(), B, N, substeps, dt_ms, p.a, p.b, p.c, p.d,
-       p.v_peak, torch.get_num_threads())
-    return drive, counts
+
+    def __init__(self, w_eff: Tensor, p: IzhikevichParams, *, dt_ms: float, substeps: int, gain: float,
+                 bernoulli: bool, iconst: Tensor, w_out: Tensor, rest: Tensor | None) -> None:
+        G, N, _ = w_eff.shape
+        tensors = {"w_eff": w_eff, "iconst": iconst, "w_out": w_out, **({} if rest is None else {"rest": rest})}
+        for name, t in tensors.items():
+            if t.dtype != w_eff.dtype or t.device.type != "cpu" or not t.is_contiguous():
+                raise ValueError(f"{name} must be a contiguous CPU tensor of {w_eff.dtype}")
+        if w_eff.dtype not in (torch.float32, torch.float64) or not 1 <= N <= MAX_NODES:
+            raise ValueError(f"w_eff must be [G, N, N] float32/float64 with N <= {MAX_NODES}, got "
+                             f"{tuple(w_eff.shape)} {w_eff.dtype}")
+        if iconst.shape != (N,) or w_out.dim() != 3 or w_out.shape[:2] != (G, N) or \
+                (rest is not None and rest.shape != (N,)):
+            raise ValueError(f"iconst and rest must be [{N}], w_out [{G}, {N}, K]")
+        lib = _library()
+        if lib is None:
+            raise ValueError("the C network kernel is not available (no C compiler, or SNN_NEAT_FUSED=0)")
+        self._fn = lib.izh_rate_control_step_f32 if w_eff.dtype == torch.float32 else lib.izh_rate_control_step_f64
+        self._keep = (w_eff, iconst, w_out, rest)  # the pointers below stay valid while these live
+        self.num_networks, self.num_neurons, self.num_outputs = G, N, w_out.shape[2]
+        self._consts = (float(gain), iconst.data_ptr(), w_eff.data_ptr(), w_out.data_ptr(),
+                        None if rest is None else rest.data_ptr(), int(substeps), float(dt_ms),
+                        *(float(x) for x in (p.a, p.b, p.c, p.d, p.v_peak)))
+        self.bernoulli = bool(bernoulli)
+
+    def __call__(self, x: Tensor, state: RecurrentState, network: Tensor, keys: Tensor | None, base: int,
+                 history: Tensor, slot: int, rate_div: float) -> tuple[Tensor, Tensor]:
+        """``(drive [B, K], counts [B, N])`` for observations ``x [B, S]`` in [0, 1].
+
+        Trusted: the caller checked shapes, dtypes, contiguity and the network indices (an index
+        outside ``w_eff`` would read outside its memory). ``state`` (``[B, N]`` tensors) and the
+        rate window ``history [W, B, N]`` are updated in place (``slot``: this step's place in it);
+        rates are spikes / ``rate_div`` (s); ``keys [B]`` and ``base``: the Bernoulli draws'
+        streams and first counter."""
+        v, u, z = state
+        B = v.shape[0]
+        counts = torch.empty_like(v)
+        drive = v.new_empty((B, self.num_outputs))
+        gain, iconst, w, w_out, rest, substeps, dt, a, b, c, d, vpeak = self._consts
+        self._fn(v.data_ptr(), u.data_ptr(), z.data_ptr(), counts.data_ptr(), w, network.data_ptr(), x.data_ptr(),
+                 x.shape[1], gain, iconst, keys.data_ptr() if self.bernoulli else None, base, history.data_ptr(),
+                 history.shape[0], slot, rate_div, w_out, self.num_outputs, rest, drive.data_ptr(), B,
+                 self.num_neurons, substeps, dt, a, b, c, d, vpeak, torch.get_num_threads())
+        return drive, counts
