@@ -76,3 +76,21 @@ def test_kernel_step_checks_observations_and_network_indices():
     bad = bad._replace(network=torch.tensor([0, 1, 2, 9]))
     with pytest.raises(ValueError, match=r"network indices must lie in \[0, 4\)"):
         controller.act(torch.rand(4, 2), bad)
+
+
+def test_rate_control_kernel_refuses_what_it_would_misread():
+    from snn_torch.functional.izhikevich import QIU2019
+    from snn_torch.functional.network_kernel import RateControlKernel
+
+    w, iconst, w_out = torch.zeros(3, 5, 5), torch.zeros(5), torch.zeros(3, 5, 2)
+    common = dict(dt_ms=0.5, substeps=20, gain=60.0, bernoulli=False, rest=None)
+    RateControlKernel(w, QIU2019, iconst=iconst, w_out=w_out, **common)  # consistent: accepted
+    with pytest.raises(ValueError, match="iconst must be a contiguous CPU tensor of torch.float32"):
+        RateControlKernel(w, QIU2019, iconst=iconst.double(), w_out=w_out, **common)
+    with pytest.raises(ValueError, match="w_out must be a contiguous"):
+        RateControlKernel(w, QIU2019, iconst=iconst, w_out=torch.zeros(3, 2, 5).transpose(1, 2), **common)
+    with pytest.raises(ValueError, match=r"iconst and rest must be \[5\], w_out \[3, 5, K\]"):
+        RateControlKernel(w, QIU2019, iconst=torch.zeros(4), w_out=w_out, **common)
+    with pytest.raises(ValueError, match="N <= 64"):
+        RateControlKernel(torch.zeros(1, 65, 65), QIU2019, iconst=torch.zeros(65), w_out=torch.zeros(1, 65, 1),
+                          **common)
