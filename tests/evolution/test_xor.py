@@ -1,6 +1,6 @@
 """NEAT's classic sanity check: sigmoid tensor NEAT solves XOR.
 
-The full 100-run figures (seeds 0-99) are in the README (`snn-neat xor --runs 100`). Here a
+The full 100-run figures (seeds 0-99) are in docs/neat.md (`snn-neat xor --runs 100`). Here a
 smaller seeded sample must stay within loose bounds that a working NEAT meets easily and
 a broken one (no speciation, no structural growth, wrong crossover) does not: on seeds
 100-123 at most 6 of 24 runs may fail within 100 generations (the 100-run failure rate is
