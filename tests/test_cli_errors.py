@@ -225,3 +225,18 @@ def test_evolve_survives_sigint_then_sigkill_and_resumes_to_the_same_bits(tmp_pa
     assert main([*args, "--out", str(cut), "--resume"]) == 0
     for name in ("statistics.csv", "champion.json"):
         assert (cut / name).read_bytes() == (tmp_path / "ref" / name).read_bytes(), name
+
+
+def test_a_crafted_command_checkpoint_is_one_line_naming_it(capsys, tmp_path):
+    from evolution.checkpoint import atomic_torch_save
+
+    out = tmp_path / "x"
+    assert main([*XOR, "--out", str(out)]) == 0
+    good = load_checkpoint_dict(out / "xor.ckpt")
+    for key, value, match in (("wall_s", float("nan"), "wall_s is nan"),
+                              ("statistics", [1, 2], "statistics is not a list of rows"),
+                              ("neat", [], "not a checkpoint of `snn-neat xor`"),
+                              ("identity", {"command": "xor"}, "it was written with seeds=None")):
+        atomic_torch_save({**good, key: value}, out / "xor.ckpt")
+        capsys.readouterr()
+        _one_line_error(capsys, [*XOR, "--out", str(out), "--resume"], match)

@@ -144,14 +144,13 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
         if not resume:
             raise ReproduceError(f"{path} exists: pass --resume to continue it, or choose another --out")
         data = load_checkpoint_dict(path, map_location="cpu")
-        saved = data.get("identity", {})
+        saved = data.get("identity")
+        saved = saved if isinstance(saved, dict) else {}
         for key, value in identity.items():
             if saved.get(key) != value:
                 raise ReproduceError(f"cannot resume {path}: it was written with {key}={saved.get(key)!r}, "
                                      f"this call asks for {key}={value!r}")
-        neat = NEAT.from_state_dict(data["neat"], device=device, name=str(path))
-        history = list(data["history"].unbind(0)) if data["history"].numel() else []
-        wall = float(data["wall_s"])
+        neat, history, wall = _resumed(path, data, device)
         config = neat.config
     else:
         config = task.config(controller, self_loops=self_loops, ga=preset, **ga_extra)
@@ -200,6 +199,25 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
                           champions=neat.best_genomes.to("cpu"), config=config, wall_s=wall,
                           extra={"complete": neat.generation >= generations or not bool(neat.active_runs.any()),
                                  "ga": ga_text})
+
+
+def _resumed(path: Path, data: dict, device: str | torch.device) -> tuple[NEAT, list[Tensor], float]:
+    """The NEAT state, Fig. 8 history (one ``[R]`` float64 row per generation) and wall time
+    of a checkpoint, each checked: a crafted or damaged file stops here, naming itself."""
+    from evolution.checkpoint import CheckpointError
+
+    if not isinstance(data.get("neat"), dict):
+        raise CheckpointError(f"checkpoint {str(path)!r} is malformed: it holds no NEAT state")
+    neat = NEAT.from_state_dict(data["neat"], device=device, name=str(path))
+    history, wall = data.get("history"), data.get("wall_s")
+    shape = (neat.generation, neat.num_runs)
+    if not isinstance(history, Tensor) or history.dtype != torch.float64 or tuple(history.shape) != shape:
+        got = (tuple(history.shape), history.dtype) if isinstance(history, Tensor) else type(history).__name__
+        raise CheckpointError(f"checkpoint {str(path)!r} is malformed: its history should be {shape} float64 "
+                              f"(generations, runs), got {got}")
+    if isinstance(wall, bool) or not isinstance(wall, (int, float)) or not 0 <= wall < float("inf"):
+        raise CheckpointError(f"checkpoint {str(path)!r} is malformed: wall_s is {wall!r:.40}")
+    return neat, list(history.unbind(0)), float(wall)
 
 
 def mann_whitney(a: list[int], b: list[int]) -> dict:

@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from evolution.checkpoint import atomic_torch_save, load_checkpoint_dict
+from evolution.checkpoint import CheckpointError, atomic_torch_save, load_checkpoint_dict
 from evolution.neat import NEAT
 from evolution.reporters import BaseReporter
 from tasks.experiments.reproduce import ReproduceError
@@ -36,13 +36,19 @@ def open_run(path: str | os.PathLike, identity: dict, *, resume: bool, device: s
         raise ReproduceError(f"{path} exists: pass --resume to continue it, or choose another --out")
     data = load_checkpoint_dict(path, map_location="cpu")
     saved = data.get("identity")
-    if not isinstance(saved, dict) or "neat" not in data:
+    if not isinstance(saved, dict) or not isinstance(data.get("neat"), dict):
         raise ReproduceError(f"cannot resume {path}: it is not a checkpoint of `snn-neat {identity['command']}`")
     for key, value in identity.items():
         if saved.get(key) != value:
             raise ReproduceError(f"cannot resume {path}: it was written with {key}={saved.get(key)!r}, "
                                  f"this call asks for {key}={value!r}")
-    return NEAT.from_state_dict(data["neat"], device=device, name=str(path)), data
+    neat = NEAT.from_state_dict(data["neat"], device=device, name=str(path))
+    wall, rows = data.get("wall_s"), data.get("statistics", [])
+    if isinstance(wall, bool) or not isinstance(wall, (int, float)) or not 0 <= wall < float("inf"):
+        raise CheckpointError(f"checkpoint {str(path)!r} is malformed: wall_s is {wall!r:.40}")
+    if not isinstance(rows, list) or not all(isinstance(r, dict) for r in rows):
+        raise CheckpointError(f"checkpoint {str(path)!r} is malformed: statistics is not a list of rows")
+    return neat, data
 
 
 class RunCheckpoint(BaseReporter):

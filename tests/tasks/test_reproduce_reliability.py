@@ -4,8 +4,10 @@ import os
 import stat
 
 import pytest
+import torch
 
 import tasks.experiments.reproduce as rep
+from evolution.checkpoint import CheckpointError, atomic_torch_save, load_checkpoint_dict
 from tasks.experiments.reproduce import FIG8_MAX_PAD, run_controller, write_report
 
 
@@ -15,6 +17,12 @@ def test_a_huge_budget_pads_fig8_to_a_bound_and_an_interrupted_report_does_not_l
     kw = dict(generations=10**12, progress=False, stop_after=1)
     first = run_controller("table2", "sigmoid", [0], out=tmp_path, **kw)
     assert tuple(first.history.shape) == (FIG8_MAX_PAD, 1)
+    good = load_checkpoint_dict(tmp_path / "sigmoid.ckpt")
+    for key, value, match in (("history", torch.zeros(3, 1, dtype=torch.float64), r"history should be \(1, 1\)"),
+                              ("neat", None, "holds no NEAT state"), ("wall_s", "x", "wall_s is 'x'")):
+        atomic_torch_save({**good, key: value}, tmp_path / "crafted" / "sigmoid.ckpt")
+        with pytest.raises(CheckpointError, match=f"crafted/sigmoid.ckpt.*{match}"):
+            run_controller("table2", "sigmoid", [0], out=tmp_path / "crafted", resume=True, **kw)
     r = run_controller("table2", "sigmoid", [0], out=tmp_path, resume=True, **kw)
     assert tuple(r.history.shape) == (FIG8_MAX_PAD, 1) and not r.extra["complete"]
     assert (r.history[1:] == r.history[1]).all() and r.history[0] <= r.history[1]
