@@ -53,15 +53,17 @@ def file_mode() -> int:
 _TEMP_NAME = re.compile(r"^\..+\.[a-z0-9_]{8}\.(tmp|png)$")
 
 
-def clean_stale_temps(folder: str | os.PathLike) -> list[Path]:
-    """Remove the temp files interrupted atomic writes left anywhere under ``folder`` (a killed
-    process cannot remove its own). Only safe while no other process writes there: call it
-    holding the folder's lock. Returns the paths removed."""
+def clean_stale_temps(*folders: str | os.PathLike) -> list[Path]:
+    """Remove the temp files that interrupted atomic writes left in ``folders`` (not below them:
+    a folder the user named may hold anything). A killed process cannot remove its own. Only
+    safe while no other process writes there: call it holding the folder's lock. Returns the
+    paths removed."""
     removed = []
-    for path in Path(folder).rglob(".*"):
-        if _TEMP_NAME.match(path.name) and path.is_file() and not path.is_symlink():
-            path.unlink(missing_ok=True)
-            removed.append(path)
+    for folder in folders:
+        for path in Path(folder).glob(".*"):
+            if _TEMP_NAME.match(path.name) and path.is_file() and not path.is_symlink():
+                path.unlink(missing_ok=True)
+                removed.append(path)
     return removed
 
 

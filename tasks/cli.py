@@ -131,6 +131,15 @@ def _check_seeds(first: int, runs: int = 1) -> list[int]:
     return list(range(first, last + 1))
 
 
+def _clean(out: str) -> None:
+    """Remove the temp files killed writes left where the commands write: ``OUT``, its
+    ``champions/``, ``shards/`` and each shard's folder (call it holding ``OUT``'s lock)."""
+    from evolution.checkpoint import clean_stale_temps
+
+    root = Path(out)
+    clean_stale_temps(root, root / "champions", root / "shards", *(p for p in root.glob("shards/*") if p.is_dir()))
+
+
 def _prepare(args: argparse.Namespace) -> list[int]:
     """Check every option that needs this machine, before any work; returns the seeds."""
     seeds = _check_seeds(args.seed, getattr(args, "runs", 1))
@@ -142,12 +151,11 @@ def _prepare(args: argparse.Namespace) -> list[int]:
 
 def _cmd_xor(args: argparse.Namespace) -> int:
     seeds = _prepare(args)
-    from evolution.checkpoint import clean_stale_temps
     from tasks.experiments.xor import run_xor, write_xor_report
     from tasks.lock import OutputLock
 
     with OutputLock(args.out, _command_line(args)):
-        clean_stale_temps(args.out)
+        _clean(args.out)
         summary = run_xor(seeds, generations=args.generations, device=args.device, out=args.out, resume=args.resume,
                           checkpoint_every=args.checkpoint_every, progress=not args.quiet)
         for path in write_xor_report(summary, args.out):
@@ -161,13 +169,12 @@ def _cmd_xor(args: argparse.Namespace) -> int:
 
 def _cmd_evolve(args: argparse.Namespace) -> int:
     _prepare(args)
-    from evolution.checkpoint import clean_stale_temps
     from tasks.experiments.evolve import run_evolve, write_evolve_report
     from tasks.lock import OutputLock
 
     out = args.out
     with OutputLock(out, _command_line(args)):
-        clean_stale_temps(out)
+        _clean(out)
         r = run_evolve(args.controller, args.task, args.seed, args.generations, out, resume=args.resume,
                        self_loops=args.self_loops, ga=args.ga, device=args.device, verbose=args.verbose,
                        report_every=args.report_every, checkpoint_every=args.checkpoint_every)
@@ -198,7 +205,6 @@ def _reproduce_checkpoints(args: argparse.Namespace) -> list[Path]:
 
 def _cmd_reproduce(args: argparse.Namespace) -> int:
     seeds = _prepare(args)
-    from evolution.checkpoint import clean_stale_temps
     from tasks.experiments.distributed import has_shards, run_controller_sharded, run_controllers_on_ray
     from tasks.experiments.reproduce import run_controller, write_report
     from tasks.lock import OutputLock
@@ -208,7 +214,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     common = dict(resume=args.resume, self_loops=args.self_loops, ga=args.ga, checkpoint_every=args.checkpoint_every,
                   device=args.device, progress=not args.quiet)
     with OutputLock(args.out, command):
-        clean_stale_temps(args.out)
+        _clean(args.out)
         if args.resume and not _reproduce_checkpoints(args):
             raise UsageError(f"--resume: --out {args.out!r} holds no checkpoint of this reproduction "
                              f"({', '.join(c + '.ckpt' for c in args.controllers)}): run without --resume to start")

@@ -113,13 +113,14 @@ def test_a_stale_lock_of_a_dead_process_is_taken_over_and_stale_temp_files_go(tm
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
     (out / LOCK_NAME).write_text(json.dumps({"pid": dead.pid, "host": os.uname().nodename, "started": 0}))
-    temps = [out / ".xor.ckpt.a1b2c3d4.tmp", out / "sub" / ".champion.json.zz_9yx8w.tmp", out / ".fig.png.abcdefgh.png"]
-    temps[1].parent.mkdir()
-    for t in temps:
+    temps = [out / ".xor.ckpt.a1b2c3d4.tmp", out / "champions" / ".snn_seed1.json.zz_9yx8w.tmp",
+             out / ".fig.png.abcdefgh.png", out / "shards" / "snn-0" / ".snn.ckpt.q1w2e3r4.tmp"]
+    kept = [out / ".keep.me", out / "mine" / ".notes.txt.abcdefgh.tmp"]  # not a temp name; not our folder
+    for t in temps + kept:
+        t.parent.mkdir(parents=True, exist_ok=True)
         t.write_bytes(b"partial")
-    (out / ".keep.me").write_text("not a temp file")
     assert main([*XOR, "--out", str(out)]) == 0
-    assert not any(t.exists() for t in temps) and (out / ".keep.me").exists()
+    assert not any(t.exists() for t in temps) and all(k.exists() for k in kept)
     assert (out / "summary.md").exists() and not (out / LOCK_NAME).exists()
 
 
