@@ -21,6 +21,20 @@ if TYPE_CHECKING:
 __all__ = ["BaseReporter", "StdOutReporter", "StatisticsReporter", "TqdmReporter", "Checkpointer"]
 
 
+def mean_std(f: Tensor, dim: int = -1) -> tuple[Tensor, Tensor]:
+    """Mean and population standard deviation of float64 ``f`` along ``dim``. Where a sum or
+    a squared deviation overflows (fitness beyond about 1e150), they are taken over ``f``
+    scaled by a power of two to at most 1 in magnitude, which is exact: the statistics of
+    finite fitness stay finite. Otherwise torch's, bit for bit."""
+    mean, std = f.mean(dim), f.std(dim, unbiased=False)
+    if bool(torch.isfinite(mean).all() & torch.isfinite(std).all()):
+        return mean, std
+    scale = torch.pow(2.0, -torch.frexp(f.abs().amax(dim, keepdim=True)).exponent.to(f.dtype))
+    m = (f * scale).mean(dim, keepdim=True) / scale
+    sd = (f * scale).std(dim, unbiased=False, keepdim=True) / scale
+    return m.squeeze(dim), sd.squeeze(dim)
+
+
 class BaseReporter:
     """Override any hook; all default to doing nothing."""
 
@@ -46,7 +60,8 @@ class StdOutReporter(BaseReporter):
         f = fitness.double()
         elapsed = time.perf_counter() - self._t0
         n_species = neat.species_state.alive.sum(1).double().mean().item()
-        print(f"gen {neat.generation:4d}  best {f.amax(1).mean().item():10.4g}  mean {f.mean().item():10.4g}  "
+        print(f"gen {neat.generation:4d}  best {mean_std(f.amax(1))[0].item():10.4g}  "
+              f"mean {mean_std(f.flatten())[0].item():10.4g}  "
               f"species {n_species:5.1f}  genes {neat.genomes.num_genes().double().mean().item():6.2f}  "
               f"hidden {neat.genomes.num_hidden(neat.config).double().mean().item():5.2f}  "
               f"solved {int((neat.solved_generation >= 0).sum())}/{neat.num_runs}  {elapsed:7.1f} s", flush=True)
@@ -75,9 +90,10 @@ class StatisticsReporter(BaseReporter):
         hidden = neat.genomes.num_hidden(neat.config).double().mean(1).cpu()
         species = neat.species_state.alive.sum(1).cpu()
         for r in range(f.shape[0]):
+            mean, std = mean_std(f[r])  # row by row, as before: the same sums, the same bits
             self._pending[r] = {
                 "generation": neat.generation, "run": r, "best_fitness": f[r].max().item(),
-                "mean_fitness": f[r].mean().item(), "std_fitness": f[r].std(unbiased=False).item(),
+                "mean_fitness": mean.item(), "std_fitness": std.item(),
                 "num_species": int(species[r]), "mean_genes": genes[r].item(),
                 "mean_hidden": hidden[r].item(), "split_refused": 0,
             }

@@ -66,3 +66,21 @@ def test_selection_kernel_refuses_counts_it_would_index_out_of_bounds_with():
     for bad in ([P + 5, 0], [-3, P + 3]):
         with pytest.raises(ValueError, match="sum to 10"):
             select_kernel.select_parents(fitness, species, survivors, torch.tensor([bad]), CFG, RunRNG([0]))
+
+
+def test_statistics_of_huge_fitness_stay_finite_and_right(capsys):
+    import math
+
+    from evolution.reporters import StatisticsReporter, StdOutReporter
+
+    P = CFG.pop_size
+    neat = NEAT(CFG, seeds=[0])
+    stats = neat.add_reporter(StatisticsReporter())
+    neat.add_reporter(StdOutReporter())
+    f = torch.full((1, P), 1.5e308, dtype=torch.float64)
+    f[0, 0] = -1.5e308
+    neat.tell(f)
+    row = stats.rows[0]
+    assert math.isclose(row["mean_fitness"], 1.5e308 / P * (P - 2), rel_tol=1e-12)  # before: inf
+    assert math.isclose(row["std_fitness"], 1.5e308 / P * 2 * math.sqrt(P - 1), rel_tol=1e-12)
+    assert "inf" not in capsys.readouterr().out
