@@ -12,7 +12,7 @@ headers) and are part of the build (and its cache key).
 Libraries are cached under ``$SNN_NEAT_CACHE`` (default ``~/.cache/snn_neat``), keyed by the
 sources, flags, compiler and CPU, and written atomically (build in a temp folder, rename), so
 concurrent processes never load half a library. A build prints one line to stderr. With no
-compiler, a failed build, an unwritable cache or ``SNN_NEAT_FUSED=0``, ``load_library`` returns
+compiler, a failed build, an unwritable cache or ``SNN_NEAT_C_KERNELS=0``, ``load_library`` returns
 None and callers use their torch path, which gives the same results (tested), only slower.
 """
 
@@ -33,7 +33,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 __all__ = ["load_library", "load_libraries", "kernels_enabled", "parse_prototypes",
-           "KernelLibrary"]
+           "KernelLibrary", "library_loader"]
 
 # No contraction, no fast-math: the kernels must repeat torch's IEEE operations exactly.
 FLAGS = ["-O3", "-march=native", "-ffp-contract=off", "-fno-fast-math", "-fopenmp", "-shared", "-fPIC", "-std=c11"]
@@ -50,9 +50,25 @@ SHARED_CSRC = Path(__file__).resolve().parent / "csrc"  # headers every library 
 _LOCAL_INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.MULTILINE)
 
 
+ENV_SWITCH = "SNN_NEAT_C_KERNELS"
+_ENV_SWITCH_OLD = "SNN_NEAT_FUSED"  # the old name ("fused" meant "C kernel"), still read
+_warned_old_switch = False
+
+
 def kernels_enabled() -> bool:
-    """False when ``SNN_NEAT_FUSED=0``: every kernel off, the torch paths run."""
-    return os.environ.get("SNN_NEAT_FUSED", "1") != "0"
+    """False when ``SNN_NEAT_C_KERNELS=0``: every C kernel off, the torch paths run.
+
+    ``SNN_NEAT_FUSED``, the variable's old name, is still read when the new one is unset (with a
+    ``DeprecationWarning``, once)."""
+    global _warned_old_switch
+    value = os.environ.get(ENV_SWITCH)
+    if value is None:
+        value = os.environ.get(_ENV_SWITCH_OLD)
+        if value is not None and not _warned_old_switch:
+            _warned_old_switch = True
+            warnings.warn(f"{_ENV_SWITCH_OLD} is deprecated; set {ENV_SWITCH} instead", DeprecationWarning,
+                          stacklevel=2)
+    return value != "0"
 
 
 def parse_prototypes(header: str) -> dict[str, tuple[object, list[object]]]:
@@ -192,7 +208,7 @@ def load_library(name: str, source: Path, header: Path) -> KernelLibrary | None:
     """The kernel library built from ``source`` (which includes ``header``), or None.
 
     None: no compiler, the build failed, the cache is unwritable, or kernels are disabled
-    (``SNN_NEAT_FUSED=0``); each but the last warns once with the reason.
+    (``SNN_NEAT_C_KERNELS=0``); each but the last warns once with the reason.
     """
     return load_libraries([(name, source, header)])[0]
 
@@ -243,3 +259,20 @@ def load_libraries(specs: Sequence[tuple[str, Path, Path]]) -> list[KernelLibrar
 def _unavailable(name: str, exc: OSError) -> None:
     warnings.warn(f"snn-neat: C kernel {name!r} unavailable ({exc}); using the torch path", RuntimeWarning,
                   stacklevel=4)
+
+
+def library_loader(name: str, source: Path, header: Path, missing_note: str | None = None):
+    """A function returning the library (``load_library``), looked up once per value of
+    ``kernels_enabled()`` (``SNN_NEAT_FUSED`` may change at any time: tests set it). Where the
+    library cannot be built, ``missing_note`` (what the fallback costs) is warned once."""
+    loaded: dict[bool, KernelLibrary | None] = {}
+
+    def library() -> KernelLibrary | None:
+        enabled = kernels_enabled()
+        if enabled not in loaded:
+            lib = loaded[enabled] = load_library(name, source, header)
+            if lib is None and enabled and missing_note:
+                warnings.warn(missing_note, RuntimeWarning, stacklevel=3)
+        return loaded[enabled]
+
+    return library

@@ -25,7 +25,7 @@ needs_kernel = pytest.mark.skipif(not breed_kernel.kernel_available(), reason="n
 
 
 @pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None, reason="no C compiler")
-@pytest.mark.skipif(not kernels_enabled(), reason="kernels disabled (SNN_NEAT_FUSED=0)")
+@pytest.mark.skipif(not kernels_enabled(), reason="kernels disabled (SNN_NEAT_C_KERNELS=0)")
 def test_the_kernels_compile_where_a_compiler_is():
     # Else every kernel test would skip, and a kernel that no longer compiles would pass CI.
     assert breed_kernel.kernel_available() and select_kernel.kernel_available()

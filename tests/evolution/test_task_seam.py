@@ -68,14 +68,13 @@ def test_same_genome_same_fitness_in_every_path_and_batch_position(kind):
     g = _population(cfg)
     task = PointMass()
     full = TaskFitness(task, cfg, kind, episodes=4, seed=3)(g)
-    # every genome alone, in a reversed batch, and (spiking) on the torch path with no kernel
+    # every genome alone, in a reversed batch, and on the torch path with no kernel
     alone = torch.stack([TaskFitness(task, cfg, kind, episodes=4, seed=3)(g.select_runs([r]))[0] for r in range(2)])
     assert torch.equal(alone, full)
     flip = torch.flip(torch.arange(g.pop_size), [0]).expand(2, -1)
     assert torch.equal(TaskFitness(task, cfg, kind, episodes=4, seed=3)(g.gather(flip)), full.flip(-1))
-    if kind == "snn":
-        torch_path = TaskFitness(task, cfg, kind, episodes=4, seed=3, backend="torch")(g)
-        assert torch.equal(torch_path, full)
+    torch_path = TaskFitness(task, cfg, kind, episodes=4, seed=3, backend="torch")(g)
+    assert torch.equal(torch_path, full)
 
 
 def test_cartpole_fitness_is_the_same_on_every_path(monkeypatch):
@@ -85,7 +84,7 @@ def test_cartpole_fitness_is_the_same_on_every_path(monkeypatch):
     g = neat.ask()
     kernel = nonmarkov_fitness("snn", cfg, max_steps=400)(g)
     assert torch.equal(nonmarkov_fitness("snn", cfg, max_steps=400, backend="torch")(g), kernel)
-    monkeypatch.setenv("SNN_NEAT_FUSED", "0")  # as on a machine without a C compiler
+    monkeypatch.setenv("SNN_NEAT_C_KERNELS", "0")  # as on a machine without a C compiler
     assert torch.equal(nonmarkov_fitness("snn", cfg, max_steps=400)(g), kernel)
     assert int(kernel.max()) > 50  # some genomes balance for a while
 
@@ -176,7 +175,7 @@ def test_markov_cartpole_with_bernoulli_inputs_is_the_same_on_every_path(monkeyp
     g = neat.ask()
     kernel = markov_fitness("snn", cfg, max_steps=150)(g)
     assert torch.equal(markov_fitness("snn", cfg, max_steps=150, backend="torch")(g), kernel)
-    monkeypatch.setenv("SNN_NEAT_FUSED", "0")
+    monkeypatch.setenv("SNN_NEAT_C_KERNELS", "0")
     assert torch.equal(markov_fitness("snn", cfg, max_steps=150)(g), kernel)
     assert int(kernel.max()) > 20
 
