@@ -18,12 +18,33 @@ from snn_torch.functional import (  # noqa: E402
     REGULAR_SPIKING,
     IzhikevichParams,
     IzhikevichState,
+    LIFParams,
+    LIFRecurrentState,
+    LIFState,
+    LIParams,
+    LIState,
     RecurrentState,
     fast_sigmoid,
     heaviside,
     superspike,
 )
-from snn_torch.modules import Izhikevich, IzhikevichCell, PopulationRecurrentIzhikevich  # noqa: E402
+from snn_torch.modules import (  # noqa: E402
+    LI,
+    LIF,
+    ConstantCurrentEncoder,
+    Izhikevich,
+    IzhikevichCell,
+    IzhikevichRecurrent,
+    LatencyEncoder,
+    LICell,
+    LIFCell,
+    LIFRecurrent,
+    PopulationRecurrentIzhikevich,
+    RateEncoder,
+    Stateful,
+    detach_states,
+    reset_states,
+)
 
 __version__ = "0.1.0"
 
@@ -32,4 +53,7 @@ __all__ = [
     "Izhikevich", "IzhikevichCell", "IzhikevichParams", "IzhikevichState",
     "PopulationRecurrentIzhikevich", "RecurrentState", "fast_sigmoid", "functional",
     "heaviside", "superspike", "__version__",
+    "ConstantCurrentEncoder", "IzhikevichRecurrent", "LatencyEncoder", "LI", "LICell", "LIF", "LIFCell",
+    "LIFParams", "LIFRecurrent", "LIFRecurrentState", "LIFState", "LIParams", "LIState", "RateEncoder", "Stateful",
+    "detach_states", "reset_states",
 ]

@@ -27,6 +27,18 @@ from snn_torch.functional.izhikevich import (
     izhikevich_step,
 )
 from snn_torch.functional.izhikevich_fused import izhikevich_step_fused
+from snn_torch.functional.latency import latency_encode
+from snn_torch.functional.lif import (
+    LIFParams,
+    LIFRecurrentState,
+    LIFState,
+    LIParams,
+    LIState,
+    li_init,
+    li_step,
+    lif_init,
+    lif_step,
+)
 from snn_torch.functional.recurrent import (
     RecurrentState,
     masked_weights,
@@ -44,5 +56,6 @@ __all__ = [
     "fast_sigmoid", "firing_rate", "heaviside", "izhikevich_init", "izhikevich_run",
     "izhikevich_step", "izhikevich_step_fused", "masked_weights", "normalize", "rate_encode", "recurrent_init",
     "recurrent_izhikevich_run", "recurrent_izhikevich_step", "superspike", "triangle",
-    "weighted_rate_force",
+    "weighted_rate_force", "LIFParams", "LIFRecurrentState", "LIFState", "LIParams", "LIState", "latency_encode",
+    "li_init", "li_step", "lif_init", "lif_step",
 ]

@@ -32,14 +32,10 @@ from snn_torch.functional.izhikevich import (
 )
 from snn_torch.functional.izhikevich_fused import izhikevich_step_fused
 from snn_torch.functional.threshold import SpikeFn, fast_sigmoid
-from snn_torch.modules._validate import check_input, check_state, neuron_parameters
+from snn_torch.modules._layer import TimeLayer
+from snn_torch.modules._validate import check_state, neuron_parameters
 
-__all__ = ["IzhikevichCell", "Izhikevich", "stack_states"]
-
-
-def stack_states(states: list, cls: type) -> object:
-    """``[state_0, ..., state_{T-1}]`` -> one ``cls`` whose fields are ``[T, ...]`` tensors."""
-    return cls(*(torch.stack(field) for field in zip(*states, strict=True)))
+__all__ = ["IzhikevichCell", "Izhikevich"]
 
 
 class _IzhikevichBase(nn.Module):
@@ -149,7 +145,9 @@ class IzhikevichCell(_IzhikevichBase):
         return self._step_fn()(i_in, state, self.params_as(state.v.dtype), validate=False, **self._kwargs())
 
 
-class Izhikevich(_IzhikevichBase):
+class Izhikevich(TimeLayer, _IzhikevichBase):
+    state_cls = IzhikevichState
+
     """A layer of Izhikevich neurons over time, driven through dense input weights.
 
     ``forward(x, state)`` takes ``x`` of shape ``[T, ..., in_features]`` (time first; with
@@ -192,40 +190,11 @@ class Izhikevich(_IzhikevichBase):
         super().__init__(p, dt_ms=dt_ms, method=method, spike_fn=spike_fn, substep_reset=substep_reset,
                          v0_mv=v0_mv, learn_params=learn_params, validate=validate, fused=fused,
                          device=device, dtype=dtype)
-        self.linear = nn.Linear(in_features, out_features, bias=bias, device=device, dtype=dtype)
-        self.batch_first = bool(batch_first)
-        self.record_states = bool(record_states)
+        self._init_layer(in_features, out_features, bias=bias, batch_first=batch_first,
+                         record_states=record_states, validate=validate, device=device, dtype=dtype)
 
-    def forward(self, x: Tensor, state: IzhikevichState | None = None) -> tuple[Tensor, IzhikevichState]:
-        if self.validate:
-            layout = "[B, T, ..., {}]" if self.batch_first else "[T, ..., {}]"
-            check_input("x", x, min_dim=2, features=self.linear.in_features, dtype=self.linear.weight.dtype,
-                        layout=layout.format(self.linear.in_features) + (" (batch first)" if self.batch_first
-                                                                          else " (time first)"))
-        if self.batch_first:
-            x = x.transpose(0, 1)
-        current = self.linear(x)
-        if state is None:
-            state = self.initial_state(current[0])
-        elif self.validate:
-            check_state(state, IzhikevichState, current.shape[1:], current)
-        p = self.params_as(current.dtype)
-        step, kwargs = self._step_fn(), self._kwargs()
-        spikes, states = [], []
-        # unbind: one backward node for all steps (T selects would each zero-fill a [T, ...] gradient)
-        for i_t in current.unbind(0):
-            z, state = step(i_t, state, p, validate=False, **kwargs)
-            spikes.append(z)
-            if self.record_states:
-                states.append(state)
-        if spikes:
-            out = torch.stack(spikes)
-        else:
-            out = current.new_zeros(current.shape)
-        if self.batch_first:
-            out = out.transpose(0, 1)
-        if self.record_states:
-            if not states:
-                return out, IzhikevichState(current.new_zeros(current.shape), current.new_zeros(current.shape))
-            return out, stack_states(states, IzhikevichState)
-        return out, state
+    def step_params(self, dtype: torch.dtype) -> IzhikevichParams:
+        return self.params_as(dtype)
+
+    def step(self, i_t: Tensor, state: IzhikevichState, p: IzhikevichParams) -> tuple[Tensor, IzhikevichState]:
+        return self._step_fn()(i_t, state, p, validate=False, **self._kwargs())
