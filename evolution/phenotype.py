@@ -393,11 +393,12 @@ class SigmoidController(_Phenotype):
     bias nodes to 1, state carried across control steps) -> decoder, for every genome."""
 
     def __init__(self, genomes: Genomes, config: NEATConfig, spec: SigmoidSpec | None = None, *, action_max: float,
-                 observation_size: int, action_size: int = 1, period_s: float | None = None) -> None:
+                 observation_size: int, action_size: int = 1, period_s: float | None = None,
+                 backend: str = "auto") -> None:
         super().__init__(genomes, config, observation_size, action_size)
         self.spec = spec = SigmoidSpec() if spec is None else spec
         self.network = PopulationRecurrentSigmoid(self.weight, self.mask, num_clamped=self.n_in, num_bias=self.n_bias,
-                                                  slope=spec.slope)
+                                                  slope=spec.slope, backend="auto" if backend == "compiled" else backend)
         self.action_max = float(action_max)
 
     def initial_state(self, network: Tensor) -> SigmoidState:
@@ -430,5 +431,5 @@ def make_controller(genomes: Genomes, config: NEATConfig, task, spec: SpikingSpe
     if kind == "sigmoid":
         if spec is not None and not isinstance(spec, SigmoidSpec):
             raise ValueError(f"a sigmoid controller takes a SigmoidSpec, got {type(spec).__name__}")
-        return SigmoidController(genomes, config, spec, **common)
+        return SigmoidController(genomes, config, spec, backend=backend, **common)
     raise ValueError(f"kind must be 'snn' or 'sigmoid', got {kind!r}")

@@ -263,7 +263,7 @@ def _unavailable(name: str, exc: OSError) -> None:
 
 def library_loader(name: str, source: Path, header: Path, missing_note: str | None = None):
     """A function returning the library (``load_library``), looked up once per value of
-    ``kernels_enabled()`` (``SNN_NEAT_FUSED`` may change at any time: tests set it). Where the
+    ``kernels_enabled()`` (``SNN_NEAT_C_KERNELS`` may change at any time: tests set it). Where the
     library cannot be built, ``missing_note`` (what the fallback costs) is warned once."""
     loaded: dict[bool, KernelLibrary | None] = {}
 

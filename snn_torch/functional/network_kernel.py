@@ -21,13 +21,12 @@ count.
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
 import torch
 from torch import Tensor
 
-from snn_torch._cbuild import KernelLibrary, kernels_enabled, load_library
+from snn_torch._cbuild import library_loader
 from snn_torch.functional.counter_rng import BernoulliSources
 from snn_torch.functional.izhikevich import IzhikevichParams
 from snn_torch.functional.recurrent import RecurrentState
@@ -39,23 +38,12 @@ MAX_NODES = 64  # lane buffers live on the stack
 _CSRC = Path(__file__).resolve().parent.parent / "csrc"
 
 
-_loaded: dict[bool, KernelLibrary | None] = {}
-
-
-def _library() -> KernelLibrary | None:
-    enabled = kernels_enabled()  # SNN_NEAT_FUSED=0 can be set at any time (tests do)
-    if enabled not in _loaded:
-        lib = _loaded[enabled] = load_library("recurrent_izhikevich", _CSRC / "recurrent_izhikevich.c",
-                                              _CSRC / "recurrent_izhikevich.h")
-        if lib is None and enabled:
-            warnings.warn(TORCH_PATH_NOTE, RuntimeWarning, stacklevel=3)
-    return _loaded[enabled]
-
-
 # What the fallback costs (benchmarks/seam_speed.py --torch-path, this 2-core CPU, one thread).
 TORCH_PATH_NOTE = ("snn-neat: spiking networks run on the torch path (no C network kernel): the same results, "
                    "but closed loops of small networks run about 25x (150 networks) to 10x (9000) slower "
                    "on the CPU; install a C compiler (cc/gcc) for the kernel")
+_library = library_loader("recurrent_izhikevich", _CSRC / "recurrent_izhikevich.c", _CSRC / "recurrent_izhikevich.h",
+                          TORCH_PATH_NOTE)
 
 
 def kernel_available() -> bool:

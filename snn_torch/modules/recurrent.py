@@ -43,6 +43,11 @@ from snn_torch.functional.recurrent import (
     recurrent_izhikevich_steps,
 )
 from snn_torch.functional.scalars import scalar
+from snn_torch.functional.sigmoid_kernel import (
+    SIGMOID_MAX_NODES,
+    sigmoid_drive_kernel,
+    sigmoid_kernel_supports,
+)
 from snn_torch.functional.threshold import SpikeFn, heaviside
 
 __all__ = ["PopulationRecurrentIzhikevich", "PopulationRecurrentSigmoid", "BACKENDS"]
@@ -296,12 +301,18 @@ class PopulationRecurrentSigmoid(_PopulationNetwork):
     steepened sigmoid: ``slope = 4.9`` ([NEAT02]).
 
     ``control_step(inputs [B, num_clamped], values [B, N], updates=1, network=None)`` returns
-    the node values after ``updates`` updates (values start at 0: ``initial_state``).
+    the node values after ``updates`` updates (values start at 0: ``initial_state``). ``backend``:
+    ``"auto"`` runs the clamp and the ordered sum in C on the CPU where it can
+    (``snn_torch.functional.sigmoid_kernel``; the sigmoid stays in torch), ``"kernel"`` insists,
+    ``"torch"`` never: the same bits either way.
     """
 
     def __init__(self, weight: Tensor, mask: Tensor, *, num_clamped: int, num_bias: int = 0,
-                 slope: float = 4.9, trainable: bool = False) -> None:
+                 slope: float = 4.9, trainable: bool = False, backend: str = "auto") -> None:
         super().__init__(weight, mask, trainable, 1.0)
+        self.backend = _check_backend(backend)
+        if self.backend == "compiled":
+            raise ValueError("PopulationRecurrentSigmoid runs on backend 'auto', 'kernel' or 'torch'")
         N = self.num_neurons
         if not 0 <= num_clamped <= N or not 0 <= num_bias <= N - num_clamped:
             raise ValueError(f"num_clamped ({num_clamped}) and num_bias ({num_bias}) must fit in {N} nodes")
@@ -328,8 +339,21 @@ class PopulationRecurrentSigmoid(_PopulationNetwork):
         if network is not None and network is not self._network_checked:  # once per batch of rows
             check_network_index(network, values.shape[0], self.num_networks)
             self._network_checked = network
-        w = self._row_weights(values.dtype, network, values.shape[0])
         y = values
+        use_kernel = self.backend != "torch" and not self.weight.requires_grad and sigmoid_kernel_supports(values)
+        if self.backend == "kernel" and not use_kernel:
+            raise ValueError(f"backend='kernel' needs CPU float32/64 values, N <= {SIGMOID_MAX_NODES}, no gradient "
+                             "and a C compiler")
+        if use_kernel:
+            # the clamp and the ordered sum in C, the sigmoid in torch: the same bits, fewer ops
+            w_eff, inputs = self.effective_weight(values.dtype), inputs.to(values.dtype)
+            k, b = self.num_clamped, self.num_bias
+            for _ in range(updates):
+                y = ordered_sigmoid(sigmoid_drive_kernel(y, inputs, w_eff, network, num_bias=b, slope=self.slope))
+                y[:, :k] = inputs
+                y[:, k : k + b] = 1.0
+            return y
+        w = self._row_weights(values.dtype, network, values.shape[0])
         for _ in range(updates):
             y = self._clamp(y, inputs)
             acc = ordered_matvec(y, w)

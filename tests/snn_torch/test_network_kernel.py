@@ -1,6 +1,8 @@
 """The C network kernel and every control-step path of PopulationRecurrentIzhikevich against the torch step."""
 
 import shutil
+import subprocess
+from pathlib import Path
 
 import pytest
 import torch
@@ -166,3 +168,43 @@ def test_sigmoid_twin_refuses_bad_network_indices_and_matches_a_row_alone():
     one = layer.control_step(x[4:5], updates=3, network=net[4:5])
     assert torch.equal(one[0], y[4])
     assert torch.equal(y[:, :2], x) and bool((y[:, 2] == 1).all())  # inputs and bias clamped
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("N, clamped, bias", [(5, 2, 1), (9, 4, 0), (40, 3, 2)])
+def test_sigmoid_kernel_equals_the_torch_updates_bit_for_bit(dtype, N, clamped, bias):
+    from snn_torch.functional.sigmoid_kernel import sigmoid_kernel_supports
+    from snn_torch.modules.recurrent import PopulationRecurrentSigmoid
+
+    g = torch.Generator().manual_seed(N)
+    w = (torch.randn(6, N, N, generator=g) * 2).to(dtype)
+    mask = torch.rand(6, N, N, generator=g) < 0.6
+    net = torch.randint(0, 6, (25,), generator=g)
+    x = torch.rand(4, 25, clamped, generator=g, dtype=dtype)
+    kernel = PopulationRecurrentSigmoid(w, mask, num_clamped=clamped, num_bias=bias, backend="kernel")
+    reference = PopulationRecurrentSigmoid(w, mask, num_clamped=clamped, num_bias=bias, backend="torch")
+    assert sigmoid_kernel_supports(kernel.initial_state(25))
+    y_k = y_t = None
+    for t in range(4):  # state carried across control steps, 2 updates each
+        y_k = kernel.control_step(x[t], y_k, updates=2, network=net)
+        y_t = reference.control_step(x[t], y_t, updates=2, network=net)
+        assert torch.equal(y_k, y_t)
+    assert 0.05 < float(y_k[:, clamped + bias:].std())  # the hidden and output values vary
+    with pytest.raises(ValueError, match="backend='kernel' needs"):
+        kernel.control_step(x[0].to(torch.float16), torch.zeros(25, N, dtype=torch.float16), network=net)
+
+
+@pytest.mark.skipif(shutil.which("nm") is None, reason="no nm to list a library's symbols")
+@pytest.mark.parametrize("stem", ["recurrent_izhikevich", "recurrent_sigmoid"])
+def test_network_libraries_export_exactly_what_their_headers_declare(stem):
+    from snn_torch._cbuild import parse_prototypes
+    from snn_torch.functional import network_kernel, sigmoid_kernel
+
+    lib = (network_kernel if stem == "recurrent_izhikevich" else sigmoid_kernel)._library()
+    if lib is None:
+        pytest.skip("no C compiler: kernels unavailable")
+    out = subprocess.run(["nm", "-D", "--defined-only", str(lib.path)], capture_output=True, text=True,
+                         check=True).stdout
+    exported = {line.split()[-1] for line in out.splitlines() if line.split()[1:2] == ["T"]}
+    header = Path(network_kernel.__file__).resolve().parent.parent / "csrc" / f"{stem}.h"
+    assert exported == set(parse_prototypes(header.read_text()))
