@@ -47,7 +47,7 @@ _library = library_loader("recurrent_izhikevich", _CSRC / "recurrent_izhikevich.
 
 
 def kernel_available() -> bool:
-    """True if the kernel compiled (once per machine) and ``SNN_NEAT_FUSED`` is not ``0``."""
+    """True if the kernel compiled (once per machine) and ``SNN_NEAT_C_KERNELS`` is not ``0``."""
     return _library() is not None
 
 
@@ -179,7 +179,7 @@ class RateControlKernel:
             raise ValueError(f"iconst and rest must be [{N}], w_out [{G}, {N}, K]")
         lib = _library()
         if lib is None:
-            raise ValueError("the C network kernel is not available (no C compiler, or SNN_NEAT_FUSED=0)")
+            raise ValueError("the C network kernel is not available (no C compiler, or SNN_NEAT_C_KERNELS=0)")
         self._fn = lib.izh_rate_control_step_f32 if w_eff.dtype == torch.float32 else lib.izh_rate_control_step_f64
         self._keep = (w_eff, iconst, w_out, rest)  # the pointers below stay valid while these live
         self.num_networks, self.num_neurons, self.num_outputs = G, N, w_out.shape[2]
