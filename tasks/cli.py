@@ -267,10 +267,12 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def _add_run_options(p: argparse.ArgumentParser) -> None:
+def _add_run_options(p: argparse.ArgumentParser, *, every: int | None) -> None:
     """--resume, --checkpoint-every and --threads, as ``reproduce`` has them."""
     p.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out")
-    p.add_argument("--checkpoint-every", type=_positive_int, default=1, help="generations between checkpoints")
+    p.add_argument("--checkpoint-every", type=_positive_int, default=every,
+                   help="generations between checkpoints (default: "
+                        + ("every 30 s, and at the end)" if every is None else f"{every})"))
     p.add_argument("--threads", type=_positive_int, default=None, help="torch threads (default: torch's)")
 
 
@@ -298,7 +300,7 @@ def build_parser() -> argparse.ArgumentParser:
     xor.add_argument("--generations", type=_positive_int, default=100, help="budget per run (default: 100)")
     xor.add_argument("--device", default="cpu", help="torch device (default: cpu)")
     xor.add_argument("--out", default="results/xor", help="output folder (default: results/xor)")
-    _add_run_options(xor)
+    _add_run_options(xor, every=None)
     xor.add_argument("--quiet", action="store_true", help="no progress bar")
     xor.set_defaults(func=_cmd_xor)
 
@@ -321,7 +323,7 @@ def build_parser() -> argparse.ArgumentParser:
     evo.add_argument("--out", default="results/evolve", help="output folder (default: results/evolve)")
     evo.add_argument("--verbose", action="store_true", help="a line per generation instead of a progress bar")
     evo.add_argument("--report-every", type=_positive_int, default=1, help="with --verbose: every N generations")
-    _add_run_options(evo)
+    _add_run_options(evo, every=1)
     evo.set_defaults(func=_cmd_evolve)
 
     rep = sub.add_parser(

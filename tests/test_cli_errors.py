@@ -145,7 +145,7 @@ def test_files_honour_the_umask(tmp_path):
 def test_ctrl_c_exits_130_naming_the_resume_command_and_resume_equals_uninterrupted(tmp_path, capsys, monkeypatch):
     import tasks.experiments.xor as xor_mod
 
-    argv = ["xor", "--runs", "3", "--generations", "6", "--seed", "7", "--quiet"]
+    argv = ["xor", "--runs", "3", "--generations", "6", "--seed", "7", "--quiet", "--checkpoint-every", "1"]
     assert main([*argv, "--out", str(tmp_path / "ref")]) == 0
     real, calls = xor_mod.xor_fitness, []
 
@@ -169,7 +169,7 @@ def test_ctrl_c_exits_130_naming_the_resume_command_and_resume_equals_uninterrup
     assert (tmp_path / "cut" / "runs.csv").read_bytes() == (tmp_path / "ref" / "runs.csv").read_bytes()
     with pytest.raises(CommandError, match="generations=6, this call asks for generations=7"):
         main(["xor", "--runs", "3", "--generations", "7", "--seed", "7", "--quiet", "--out", str(tmp_path / "cut"),
-              "--resume"])
+              "--resume", "--checkpoint-every", "1"])
     with pytest.raises(CommandError, match="exists: pass --resume"):
         main([*argv, "--out", str(tmp_path / "cut")])
 
@@ -241,3 +241,21 @@ def test_a_crafted_command_checkpoint_is_one_line_naming_it(capsys, tmp_path):
         atomic_torch_save({**good, key: value}, out / "xor.ckpt")
         capsys.readouterr()
         _one_line_error(capsys, [*XOR, "--out", str(out), "--resume"], match)
+
+
+@pytest.mark.parametrize("every, interval_s, saved", [(2, 0.0, [2, 4, 5]), (None, 0.0, [1, 2, 3, 4, 5]),
+                                                      (None, 3600.0, [5])])
+def test_run_checkpoint_writes_every_n_generations_or_by_time_and_at_the_end(tmp_path, monkeypatch, every,
+                                                                             interval_s, saved):
+    from evolution.neat import NEAT
+    from tasks.experiments.resumable import RunCheckpoint
+    from tests.evolution.helpers import small_config
+
+    neat = NEAT(small_config(), seeds=[0])
+    ckpt = neat.add_reporter(RunCheckpoint(tmp_path / "c.ckpt", {"command": "test"}, 5, every=every,
+                                           interval_s=interval_s))
+    written = []
+    real = ckpt.save
+    monkeypatch.setattr(ckpt, "save", lambda n: written.append(n.generation) or real(n))
+    neat.run(lambda g: torch.zeros(1, 6, dtype=torch.float64), 5)
+    assert written == saved

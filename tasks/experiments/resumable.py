@@ -52,17 +52,22 @@ def open_run(path: str | os.PathLike, identity: dict, *, resume: bool, device: s
 
 
 class RunCheckpoint(BaseReporter):
-    """Writes ``path`` every ``every`` generations and when the run ends (its budget of
-    ``generations`` spent, or every run solved). ``records()`` adds the command's own entries;
-    add this reporter after those that fill them. ``wall_s``: seconds spent before this process."""
+    """Writes ``path`` every ``every`` generations, or with ``every=None`` at the end of the first
+    generation ``interval_s`` seconds after the last write (a population of large genomes takes
+    a while to write, which every generation of a fast task would repeat), and when the run ends
+    (its budget of ``generations`` spent, or every run solved). ``records()`` adds the command's
+    own entries; add this reporter after those that fill them. ``wall_s``: seconds spent before
+    this process."""
 
-    def __init__(self, path: str | os.PathLike, identity: dict, generations: int, *, every: int = 1,
-                 records: Callable[[], dict] = dict, wall_s: float = 0.0) -> None:
-        if every < 1:
+    def __init__(self, path: str | os.PathLike, identity: dict, generations: int, *, every: int | None = 1,
+                 interval_s: float = 30.0, records: Callable[[], dict] = dict, wall_s: float = 0.0) -> None:
+        if every is not None and every < 1:
             raise ReproduceError(f"checkpoint_every must be >= 1, got {every}")
         self.path, self.identity, self.generations, self.every = Path(path), identity, generations, every
+        self.interval_s = interval_s
         self.records = records
         self._wall0, self._start = wall_s, time.perf_counter()
+        self._last = self._start
 
     @property
     def wall_s(self) -> float:
@@ -72,11 +77,18 @@ class RunCheckpoint(BaseReporter):
     def finished(self, neat: NEAT) -> bool:
         return neat.generation >= self.generations or not bool(neat.active_runs.any())
 
+    def due(self, neat: NEAT) -> bool:
+        if self.every is None:
+            return time.perf_counter() - self._last >= self.interval_s
+        return neat.generation % self.every == 0
+
     def end_generation(self, neat: NEAT) -> None:
-        if neat.generation % self.every == 0 or self.finished(neat):
+        if self.due(neat) or self.finished(neat):
             self.save(neat)
 
     def save(self, neat: NEAT) -> Path:
         state = neat.state_dict()
-        return atomic_torch_save({"format": state["format"], "version": state["version"], "identity": self.identity,
+        path = atomic_torch_save({"format": state["format"], "version": state["version"], "identity": self.identity,
                                   "neat": state, "wall_s": self.wall_s, **self.records()}, self.path)
+        self._last = time.perf_counter()
+        return path
