@@ -1,3 +1,5 @@
+import os
+import stat
 import subprocess
 import sys
 
@@ -9,9 +11,14 @@ from tasks.cli import main
 
 
 def test_figures_command_writes_both_pngs(tmp_path):
-    assert main(["figures", "--out", str(tmp_path), "--dt-ms", "0.1"]) == 0
+    old = os.umask(0o027)
+    try:
+        assert main(["figures", "--out", str(tmp_path), "--dt-ms", "0.1"]) == 0
+    finally:
+        os.umask(old)
     for name in ("fig1_voltage_response.png", "fig2_fi_curve.png"):
         path = tmp_path / name
+        assert stat.S_IMODE(path.stat().st_mode) == 0o640  # the umask's mode, not mkstemp's 0600
         img = imread(path)
         assert img.shape[0] > 300 and img.shape[1] > 400
         assert np.std(img[..., :3]) > 0.05  # something is drawn, not a blank canvas
