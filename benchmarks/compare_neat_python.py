@@ -148,14 +148,14 @@ def main() -> None:
                 nss = f"{py_rate * N_NODES * SUBSTEPS:.3g}" if kind == "snn" else "-"
                 print(f"{kind:<10}{B:>8}{f'neat-python ({count} genomes)':>26}{py_rate:>16.3g}{nss:>19}{'1.0x':>16}")
             # The torch path is what CUDA runs; compiled (spiking only), it is CUDA's default.
-            # Sigmoid networks have one path (torch); spiking ones: the C kernel (the CPU's default),
-            # the eager torch step, and the compiled torch step (CUDA's default).
+            # Both networks: the C kernel (the CPU's default) and the eager torch path (what runs
+            # with no C compiler); spiking ones also the compiled torch step (CUDA's default).
             paths = [("seam, C kernel", "auto"), ("seam, torch eager", "torch"), ("seam, torch compiled", "compiled")]
             if kind == "sigmoid":
-                paths = [("seam, torch", "auto")]
+                paths = paths[:2]
             for name, backend in paths:
-                if backend == "torch" and B > 150:
-                    continue  # the eager path at 9000 takes minutes
+                if kind == "snn" and backend == "torch" and B > 150:
+                    continue  # the spiking eager path at 9000 takes minutes
                 if backend == "compiled" and not compiled_once:  # paid once per process, before the timed runs
                     compiled_once = True
                     t0 = time.perf_counter()
