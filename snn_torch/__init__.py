@@ -43,6 +43,8 @@ from snn_torch.modules import (  # noqa: E402
     RateEncoder,
     Stateful,
     detach_states,
+    export_nir,
+    import_nir,
     reset_states,
 )
 
@@ -55,5 +57,5 @@ __all__ = [
     "heaviside", "superspike", "__version__",
     "ConstantCurrentEncoder", "IzhikevichRecurrent", "LatencyEncoder", "LI", "LICell", "LIF", "LIFCell",
     "LIFParams", "LIFRecurrent", "LIFRecurrentState", "LIFState", "LIParams", "LIState", "RateEncoder", "Stateful",
-    "detach_states", "reset_states",
+    "detach_states", "export_nir", "import_nir", "reset_states",
 ]
