@@ -396,6 +396,8 @@ def _user_error(exc: Exception) -> str | None:
 
     if isinstance(exc, (UsageError, ReproduceError, CheckpointError, ConfigError, LockError)):
         return " ".join(str(exc).split("\n"))
+    if isinstance(exc, ModuleNotFoundError) and (exc.name or "").split(".")[0] == "ray":
+        return "--ray needs Ray, which is not installed here: pip install 'ray[default]', or leave --ray out"
     if isinstance(exc, OSError):  # a full disk, a folder made read-only meanwhile, ...
         where = f" {exc.filename}" if exc.filename else ""
         return f"cannot write{where}: {exc.strerror or exc}; free space or choose another --out"

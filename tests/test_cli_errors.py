@@ -259,3 +259,9 @@ def test_run_checkpoint_writes_every_n_generations_or_by_time_and_at_the_end(tmp
     monkeypatch.setattr(ckpt, "save", lambda n: written.append(n.generation) or real(n))
     neat.run(lambda g: torch.zeros(1, 6, dtype=torch.float64), 5)
     assert written == saved
+
+
+def test_ray_missing_is_one_line(capsys, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray raises ModuleNotFoundError
+    _one_line_error(capsys, ["reproduce", "table2", "--runs", "1", "--ray", "auto", "--out", str(tmp_path)],
+                    "--ray needs Ray")
