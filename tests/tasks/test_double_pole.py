@@ -147,3 +147,26 @@ def test_dpnv_evolves_through_the_public_seam():
     result = neat.run(fitness, generations=4)
     assert first.shape == (1, 24) and bool((first > 0).all())  # every genome balances a few steps
     assert float(result.best_fitness[0]) > float(first.max())
+
+
+def test_generalization_grid_and_the_champion_test():
+    from tasks.double_pole import GRUAU_RANGES, balanced_steps, champion_solves, generalization_starts
+
+    grid = generalization_starts()
+    assert grid.shape == (625, 6) and bool((grid[:, 4:] == 0).all())
+    for k, a in enumerate(GRUAU_RANGES):  # each variable at 5 levels, +-0.9 of its range at the extremes
+        assert sorted(set(grid[:, k].tolist())) == pytest.approx([a * v for v in (-0.9, -0.5, 0.0, 0.5, 0.9)])
+    cfg = spiking_config(num_inputs=3, num_outputs=1, pop_size=16, max_hidden=4)
+    neat = NEAT(cfg, seeds=[3, 4])
+    neat.run(TaskFitness(DoublePoleTask.without_velocities(), cfg, "snn"), 3)
+    genomes = neat.ask()
+    steps = balanced_steps(genomes, cfg, max_steps=60)[..., 0]  # [R, P] from the standard start
+    alone = balanced_steps(genomes.select_runs([1]), cfg, max_steps=60)[0, :, 0]
+    assert torch.equal(alone, steps[1])  # a genome's balance does not depend on its batch
+    fitness = steps.to(torch.float64)
+    solved = champion_solves(genomes, fitness, cfg, long_steps=60, min_general=0)
+    assert solved.shape == (2, 16) and int(solved.sum(-1).max()) <= 1  # at most the champion, per run
+    champion_steps = steps.gather(1, fitness.argmax(-1, keepdim=True))[:, 0]
+    assert torch.equal(solved.any(-1), champion_steps >= 60)
+    never = champion_solves(genomes, fitness, cfg, long_steps=60, min_general=626)  # more starts than exist
+    assert not bool(never.any())
