@@ -13,14 +13,20 @@ CFG = small_config(pop_size=40, max_hidden=6, node_add_prob=0.2, conn_add_prob=0
 PATHS = [False] + ([True] if select_kernel.kernel_available() else [])
 
 
-def _evolve(fused: bool, low: float, high: float, generations: int = 3) -> NEAT:
+def _evolve(fused: bool, low: float, high: float, generations: int = 3, device: str = "cpu") -> NEAT:
     gen = torch.Generator().manual_seed(3)
-    neat = NEAT(CFG, seeds=[0, 1])
+    neat = NEAT(CFG, seeds=[0, 1], device=device)
     neat.fused_breeding = fused
     for _ in range(generations):
         u = torch.rand(2, CFG.pop_size, generator=gen, dtype=torch.float64)
-        neat.tell(low * (1 - u) + high * u)
+        neat.tell((low * (1 - u) + high * u).to(device))
     return neat
+
+
+def test_huge_finite_fitness_breeds_on_cuda():
+    neat = _evolve(False, -1.7e308, 1.7e308, device="cuda")  # the tensor path on the GPU
+    assert neat.generation == 3
+    check_invariants(neat.genomes, CFG)
 
 
 @pytest.mark.parametrize("low, high", [(0.0, 1.7e307), (-1.7e308, 1.7e308), (1e308, 1.79e308)])
