@@ -148,18 +148,18 @@ def _forward(i: Tensor, v: Tensor, u: Tensor, p: IzhikevichParams, dt: float, he
     v1, u1, ve, _ = _solve(v, u, i, a, b, dt, heun)
     x = v1 - v_peak
     x.nan_to_num_(nan=0.0)  # NaN (overflow at absurd currents) counts as a spike, as in izhikevich_step
+    if not substep_reset:
+        # Reset at the end of the step, in float arithmetic (bool masks and torch.where are several
+        # times slower on the CPU): z = [x >= 0] as 0./1.; v_new = v1 (1 - z) + c z and u_new = u1 + d z
+        # give izhikevich_step's values exactly (x * 1 = x, x + 0 = x; nan_to_num makes a NaN v1 reset to c).
+        z = x.sign().add_(1.0).clamp_(max=1.0)
+        keep = 1.0 - z
+        v1.nan_to_num_().mul_(keep).add_(z * c)
+        u1.add_(z * d)
+        return x, v1, u1, (v, ve, keep)
     idx = (x >= 0).view(-1).nonzero().squeeze(1)
     saved: tuple[Tensor, ...] = ()
-    if idx.numel() and not substep_reset:
-        # v_new = c, u_new = u1 + d where spiked: the same single operations, in place.
-        cs, ds = _flat(c, idx, v), _flat(d, idx, v)
-        if isinstance(cs, Tensor) and cs.dim():
-            v1.view(-1).index_copy_(0, idx, torch.zeros_like(cs) + cs)
-        else:
-            v1.view(-1).index_fill_(0, idx, 0.0 + cs)
-        u1.view(-1).index_add_(0, idx, ds.expand(idx.shape) if isinstance(ds, Tensor) else
-                               torch.full(idx.shape, ds, dtype=u1.dtype))
-    elif idx.numel():
+    if idx.numel():
         vs, us, v1s, u1s = v.reshape(-1)[idx], u.reshape(-1)[idx], v1.view(-1)[idx], u1.view(-1)[idx]
         cs, ds = _flat(c, idx, v), _flat(d, idx, v)
         i_s = i.reshape(-1)[idx]
@@ -191,33 +191,33 @@ class _IzhikevichStep(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx: Any, gx: Tensor | None, gv: Tensor | None, gu: Tensor | None):  # type: ignore[override]
-        v, ve, idx, *saved = ctx.saved_tensors
+        v, ve, idx, *saved = ctx.saved_tensors  # idx: spike indices, or the spike mask without substep_reset
         a, b, _, _, _ = ctx.params
         dt, heun = ctx.dt, ctx.heun
         zero = torch.zeros_like(v) if gx is None or gv is None or gu is None else None
         gx, gv, gu = (zero if g is None else g for g in (gx, gv, gu))
+        if not ctx.substep_reset:  # idx is keep = 1 - z: v_new = v1 keep + c z, u_new = u1 + d z
+            g_v, g_u, g_i, _ = _solve_backward(torch.addcmul(gx, gv, idx), gu, v, ve, a, b, dt, heun)
+            return g_i, g_v, g_u, None, None, None, None
         # Neurons that did not spike: v_new = v1, u_new = u1, and x = v1 - v_peak.
         gv1 = gv + gx
         gu1 = gu.clone()
         extra = None
         if idx.numel():
             gx_s, gvn, gun = gx.reshape(-1)[idx], gv.reshape(-1)[idx], gu.reshape(-1)[idx]
-            if ctx.substep_reset:
-                rise, q, theta, du, hr, ve_r, dv1_r, du1_r, s_v, s_u = saved
-                a_s, b_s = _flat(a, idx, v), _flat(b, idx, v)
-                # The reset sub-step runs from the constant c over hr = (1 - theta) dt.
-                _, g_uth, g_i_s, g_hr = _solve_backward(gvn, gun, None, ve_r, a_s, b_s, hr, heun,
-                                                        slopes=(dv1_r, du1_r, s_v, s_u))
-                # u_th = u + theta (u1 - u) + d;  hr = (1 - theta) dt;  theta = clamp(q, 0, 1)
-                g_theta = g_uth * du - g_hr * dt
-                g_q = g_theta * ((q >= 0.0) & (q <= 1.0)).to(q.dtype)
-                # q = (v_peak - v) / rise, rise = v1 - v
-                g_rise = -g_q * q / rise
-                gv1_s = gx_s + g_rise
-                gu1_s = g_uth * theta
-                extra = (-g_q / rise - g_rise, g_uth * (1.0 - theta), g_i_s)
-            else:
-                gv1_s, gu1_s = gx_s, gun
+            rise, q, theta, du, hr, ve_r, dv1_r, du1_r, s_v, s_u = saved
+            a_s, b_s = _flat(a, idx, v), _flat(b, idx, v)
+            # The reset sub-step runs from the constant c over hr = (1 - theta) dt.
+            _, g_uth, g_i_s, g_hr = _solve_backward(gvn, gun, None, ve_r, a_s, b_s, hr, heun,
+                                                    slopes=(dv1_r, du1_r, s_v, s_u))
+            # u_th = u + theta (u1 - u) + d;  hr = (1 - theta) dt;  theta = clamp(q, 0, 1)
+            g_theta = g_uth * du - g_hr * dt
+            g_q = g_theta * ((q >= 0.0) & (q <= 1.0)).to(q.dtype)
+            # q = (v_peak - v) / rise, rise = v1 - v
+            g_rise = -g_q * q / rise
+            gv1_s = gx_s + g_rise
+            gu1_s = g_uth * theta
+            extra = (-g_q / rise - g_rise, g_uth * (1.0 - theta), g_i_s)
             gv1.view(-1)[idx] = gv1_s
             gu1.view(-1)[idx] = gu1_s
         g_v, g_u, g_i, _ = _solve_backward(gv1, gu1, v, ve, a, b, dt, heun)
