@@ -23,6 +23,7 @@ step itself, with no data-dependent shapes).
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import torch
@@ -154,7 +155,7 @@ def _forward(i: Tensor, v: Tensor, u: Tensor, p: IzhikevichParams, dt: float, he
         # give izhikevich_step's values exactly (x * 1 = x, x + 0 = x; nan_to_num makes a NaN v1 reset to c).
         z = x.sign().add_(1.0).clamp_(max=1.0)
         keep = 1.0 - z
-        v1.nan_to_num_().mul_(keep).add_(z * c)
+        v1.nan_to_num_(nan=0.0, posinf=0.0, neginf=-math.inf).mul_(keep).add_(z * c)  # -inf never spikes
         u1.add_(z * d)
         return x, v1, u1, (v, ve, keep)
     idx = (x >= 0).view(-1).nonzero().squeeze(1)
