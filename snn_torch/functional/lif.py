@@ -104,8 +104,8 @@ def lif_step(i_in: Tensor, state: LIFState, p: LIFParams, *, dt_ms: float = 1.0,
     v1 = _relax(i_in, state.v, p.tau_mem_ms, p.v_leak, p.r, dt_ms)
     z = spike_fn(v1 - p.v_th)
     spiked = z.detach()
-    if reset == "zero":
-        v_new = torch.where(spiked > 0, p.v_reset, v1)
+    if reset == "zero":  # v_reset where spiked, else v1; arithmetic, not torch.where (slow on the CPU)
+        v_new = v1 * (1.0 - spiked) + spiked * p.v_reset
     else:
         v_new = v1 - spiked * (p.v_th - p.v_reset)
     return z, LIFState(v_new)
