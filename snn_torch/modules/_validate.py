@@ -57,12 +57,15 @@ def neuron_parameters(module: nn.Module, params: NamedTuple, learn: bool | tuple
                       *, device: torch.device | str | None, dtype: torch.dtype | None) -> None:
     """Register every field of ``params`` on ``module`` as an ``nn.Parameter`` of that name.
 
-    Fields named in ``learn`` (or all, with ``learn=True``) require grad; the others do not but
+    Fields named in ``learn`` (or all, with ``learn=True``), and fields given as tensors that
+    require grad, require grad; the others do not but
     still follow ``.to()`` and ``state_dict``. Floats become 0-dim tensors; tensors keep their
     shape (for example ``[N]``, one value per neuron).
     """
     fields = type(params)._fields
     wanted = set(fields) if learn is True else set() if learn is False else set(learn)
+    # A tensor that already requires grad (an nn.Parameter in the params tuple) is meant to be learned.
+    wanted |= {f for f, v in zip(fields, params, strict=True) if isinstance(v, Tensor) and v.requires_grad}
     unknown = wanted - set(fields)
     if unknown:
         raise ValueError(f"learn_params names unknown fields {sorted(unknown)}; fields are {list(fields)}")

@@ -78,6 +78,8 @@ def test_neuron_parameters_are_registered_and_follow_to():
     assert layer.c.dtype == torch.float64 and layer.c.item() == -50.0
     z, state = layer(torch.rand(5, 2, 3, dtype=torch.float64))
     assert state.v.dtype == torch.float64
+    given = Izhikevich(3, 4, layer.p._replace(d=nn.Parameter(torch.tensor(2.0))))  # a Parameter is learned
+    assert given.d.requires_grad and not given.c.requires_grad
     with pytest.raises(ValueError, match="learn_params names unknown fields"):
         LIF(3, 4, learn_params=["tau"])
 
