@@ -86,6 +86,20 @@ def rows() -> list[Row]:
             model = nn.ModuleList([lin, neurons])
             return model, lambda x: neurons(lin(x))[0]
         out.append(Row("norse Izhikevich euler 0.25ms", 0.25, build_norse_izh))
+
+        def build_norse_izh_cells():
+            # Norse's cell stepped over current.unbind(0): its neuron arithmetic without its SNN loop,
+            # whose per-step input[t] costs a full-size zero-filled gradient each in the backward.
+            lin, cell = _linear(0.6, 8.0), norse.IzhikevichCell(norse.tonic_bursting, dt=0.001)
+
+            def run(x):
+                state, spikes = None, []
+                for i_t in lin(x).unbind(0):
+                    z, state = cell(i_t, state)
+                    spikes.append(z)
+                return torch.stack(spikes)
+            return nn.ModuleList([lin, cell]), run
+        out.append(Row("norse IzhikevichCell over unbind 0.25ms", 0.25, build_norse_izh_cells))
     if hasattr(snn_torch, "LIF"):
         def build_lif():
             layer = snn_torch.LIF(IN, OUT, dt_ms=1.0, validate=False)
@@ -134,6 +148,22 @@ def saved_bytes(row: Row, x: torch.Tensor) -> int:
     return sum(seen.values())
 
 
+def ops_per_step(row: Row, x: torch.Tensor) -> float:
+    """aten operations per step of a no-grad forward (the Linear over all steps included)."""
+    from torch.utils._python_dispatch import TorchDispatchMode
+
+    class Count(TorchDispatchMode):
+        n = 0
+
+        def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+            Count.n += 1
+            return func(*args, **(kwargs or {}))
+
+    with torch.no_grad(), Count():
+        row.run(x)
+    return Count.n / x.shape[0]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--batches", type=int, nargs="+", default=[64, 1024])
@@ -178,14 +208,15 @@ def main() -> None:
                 rates[row.name] = z.mean().item() / row.step_ms * 1000.0
         print(f"\nbatch {batch}")
         print(f"| {'model':<40} | step ms | fwd us/step | fwd+bwd us/step | fwd us/ms | fwd+bwd us/ms "
-              f"| saved KiB/ms | rate Hz |")
-        print("|" + "---|" * 8)
+              f"| saved KiB/ms | rate Hz | aten ops/step |")
+        print("|" + "---|" * 9)
         for row in table:
             steps = xs[row.name].shape[0]
             f, b = statistics.median(fwd[row.name]) * 1e6, statistics.median(fb[row.name]) * 1e6
             mem = saved_bytes(row, xs[row.name]) / args.sim_ms / 1024
             print(f"| {row.name:<40} | {row.step_ms:g} | {f / steps:.0f} | {b / steps:.0f} | {f / args.sim_ms:.0f} | "
-                  f"{b / args.sim_ms:.0f} | {mem:.0f} | {rates[row.name]:.0f} |")
+                  f"{b / args.sim_ms:.0f} | {mem:.0f} | {rates[row.name]:.0f} | "
+                  f"{ops_per_step(row, xs[row.name]):.1f} |")
 
 
 if __name__ == "__main__":
