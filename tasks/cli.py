@@ -140,8 +140,42 @@ def _clean(out: str) -> None:
     clean_stale_temps(root, root / "champions", root / "shards", *(p for p in root.glob("shards/*") if p.is_dir()))
 
 
+def _check_memory(runs: int, configs: list) -> None:
+    """Refuse a ``--runs`` whose populations alone cannot fit in this machine's memory (a typo
+    such as --runs 100000000 would otherwise spend minutes before failing)."""
+    # weight (float32) + conn + enabled bytes per gene slot, times 3: parents, children, a checkpoint's
+    # copy; the controllers of a reproduction evolve one after another
+    need = max(runs * c.pop_size * c.num_nodes**2 * 6 * 3 for c in configs)
+    try:
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):  # no sysconf: no check
+        return
+    if need > total:
+        raise UsageError(f"--runs {runs} needs about {need / 1e9:,.0f} GB for its populations alone, more than this "
+                         f"machine's {total / 1e9:,.0f} GB: use fewer --runs")
+
+
+def _configs(args: argparse.Namespace) -> list:
+    """The NEAT configs a command will evolve (for the memory check)."""
+    if args.command == "xor":
+        from tasks.xor import XOR_CONFIG
+
+        return [XOR_CONFIG]
+    from tasks.experiments import cartpole as cp
+
+    table = args.table if args.command == "reproduce" else ("table1" if args.task == "markov" else "table2")
+    make = cp.markov_config if table == "table1" else cp.controller_config
+    controllers = args.controllers if args.command == "reproduce" else [args.controller]
+    out = []
+    for c in controllers:
+        preset, extra = cp.ga_choice(table, c, args.ga)
+        out.append(make(c, self_loops=args.self_loops, ga=preset, **extra))
+    return out
+
+
 def _prepare(args: argparse.Namespace) -> list[int]:
     """Check every option that needs this machine, before any work; returns the seeds."""
+    _check_memory(getattr(args, "runs", 1), _configs(args))
     seeds = _check_seeds(args.seed, getattr(args, "runs", 1))
     _check_device(args.device)
     _check_threads(args.threads)

@@ -45,6 +45,8 @@ def _one_line_error(capsys, argv, match):
     (["xor", "--seed", str(2**63 - 1), "--runs", "2"], "reaches seed 9223372036854775808"),
     (["evolve", "--seed", str(2**63)], "seeds must be below 2**63"),
     (["reproduce", "table2", "--seed", str(2**64), "--runs", "1"], "seeds must be below 2**63"),
+    (["xor", "--runs", "100000000000"], "--runs 100000000000 needs about"),
+    (["reproduce", "table1", "--runs", "100000000", "--controllers", "snn"], "use fewer --runs"),
 ])
 def test_bad_options_are_one_line_before_any_work(argv, match, capsys, tmp_path):
     out = tmp_path / "out"
