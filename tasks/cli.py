@@ -430,6 +430,11 @@ def _user_error(exc: Exception) -> str | None:
 
     if isinstance(exc, (UsageError, ReproduceError, CheckpointError, ConfigError, LockError)):
         return " ".join(str(exc).split("\n"))
+    import torch
+
+    oom = getattr(torch, "OutOfMemoryError", MemoryError)  # CUDA's (torch >= 2.5)
+    if isinstance(exc, (MemoryError, oom)) or (isinstance(exc, RuntimeError) and "can't allocate memory" in str(exc)):
+        return "out of memory: use fewer --runs, or free memory (on a GPU: use a larger one or --device cpu)"
     if isinstance(exc, ModuleNotFoundError) and (exc.name or "").split(".")[0] == "ray":
         return "--ray needs Ray, which is not installed here: pip install 'ray[default]', or leave --ray out"
     if isinstance(exc, OSError):  # a full disk, a folder made read-only meanwhile, ...

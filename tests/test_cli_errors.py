@@ -267,3 +267,15 @@ def test_ray_missing_is_one_line(capsys, tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray raises ModuleNotFoundError
     _one_line_error(capsys, ["reproduce", "table2", "--runs", "1", "--ray", "auto", "--out", str(tmp_path)],
                     "--ray needs Ray")
+
+
+@pytest.mark.parametrize("error", [MemoryError(), RuntimeError("[enforce fail] DefaultCPUAllocator: can't allocate "
+                                                                "memory: you tried to allocate 8000000000000 bytes")])
+def test_running_out_of_memory_is_one_line(error, capsys, tmp_path, monkeypatch):
+    import tasks.experiments.xor as xor_mod
+
+    def exhausted(*args, **kwargs):
+        raise error
+
+    monkeypatch.setattr(xor_mod, "run_xor", exhausted)
+    _one_line_error(capsys, [*XOR, "--out", str(tmp_path)], "out of memory: use fewer --runs")
