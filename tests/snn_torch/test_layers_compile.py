@@ -36,19 +36,32 @@ def _drive(layer):
 
 @pytest.mark.parametrize("name", sorted(LAYERS))
 def test_layer_compiles_fullgraph_and_equals_eager(name):
+    """Forward equal to eager; for Izhikevich also the backward (AOT autograd traces it: the plain
+    step under compile, the fused one in eager)."""
     torch._dynamo.reset()
+    torch.manual_seed(0)
     layer = LAYERS[name]()
     x = _drive(layer)
     # A warm state near threshold, so four steps already spike (and validation of a given state compiles).
     _, state = layer(torch.cat([x] * 5))
-    compiled = torch.compile(layer, fullgraph=True, backend="eager")
-    out_c, state_c = compiled(x, state)
-    out_e, state_e = layer(x, state)
+    state = type(state)(*(t.detach() for t in state))
+    backend = "aot_eager" if name == "Izhikevich" else "eager"
+    compiled = torch.compile(layer, fullgraph=True, backend=backend)
+    readout = torch.linspace(-1, 1, 4)
+    results = []
+    for model in (compiled, layer):
+        layer.zero_grad()
+        out, final = model(x, state)
+        (out * readout).sum().backward()
+        results.append((out, final, layer.linear.bias.grad.clone()))
+    (out_c, state_c, grad_c), (out_e, state_e, grad_e) = results
     torch.testing.assert_close(out_c, out_e, rtol=0, atol=0)
     for a, b in zip(state_c, state_e, strict=True):
         torch.testing.assert_close(a, b, rtol=0, atol=0)
+    torch.testing.assert_close(grad_c, grad_e, rtol=1e-5, atol=1e-6)
     if name != "LI":
         assert out_e.sum() > 0
+    assert grad_e.abs().sum() > 0
 
 
 @pytest.mark.parametrize("name", sorted(CELLS))
@@ -71,21 +84,3 @@ def test_encoders_compile_fullgraph():
     spikes = torch.compile(RateEncoder(500, f_max_hz=500.0), fullgraph=True, backend="eager")(x)
     assert spikes.shape == (500, 2, 3) and set(spikes.unique().tolist()) <= {0.0, 1.0}
     torch.testing.assert_close(spikes.mean(0), x * 0.5, atol=0.1, rtol=0)  # 500 Hz at 1 ms: p = x / 2
-
-
-def test_compiled_training_step_matches_eager_gradients():
-    """AOT autograd traces the backward too (the plain step under compile, the fused one in eager)."""
-    torch._dynamo.reset()
-    torch.manual_seed(0)
-    layer = Izhikevich(3, 4)
-    x = _drive(layer)
-    _, state = layer(torch.cat([x] * 5))
-    state = type(state)(*(t.detach() for t in state))
-    grads = []
-    for model in (torch.compile(layer, fullgraph=True, backend="aot_eager"), layer):
-        layer.zero_grad()
-        z, _ = model(x, state)
-        (z * torch.linspace(-1, 1, 4)).sum().backward()
-        grads.append(layer.linear.bias.grad.clone())
-    assert grads[1].abs().sum() > 0
-    torch.testing.assert_close(grads[0], grads[1], rtol=1e-5, atol=1e-6)
