@@ -7,12 +7,12 @@ the finite check reads the data, so it is skipped while compiling (a graph break
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import torch
 from torch import Tensor, nn
 
-__all__ = ["check_input", "check_state", "neuron_parameters"]
+__all__ = ["check_input", "check_state", "neuron_parameters", "params_for_step"]
 
 
 def check_input(name: str, x: object, *, min_dim: int, features: int | None, dtype: torch.dtype | None,
@@ -74,3 +74,22 @@ def neuron_parameters(module: nn.Module, params: NamedTuple, learn: bool | tuple
         data = value.detach().clone() if isinstance(value, Tensor) else torch.tensor(float(value))
         data = data.to(device=device, dtype=dtype)
         module.register_parameter(field, nn.Parameter(data, requires_grad=field in wanted))
+
+
+def params_for_step(params: NamedTuple, dtype: torch.dtype) -> Any:
+    """``params`` (a NamedTuple of tensors) ready for a step on ``dtype`` tensors.
+
+    Each tensor is cast to ``dtype``. A 0-dim CPU tensor that needs no gradient becomes a Python
+    float holding the same ``dtype`` value: the step's scalar arithmetic then stays in Python
+    instead of launching an aten op per use (the same bits: a float operand is rounded to the
+    tensor's dtype). Kept as tensors while compiling (no ``.item()`` in the graph).
+    """
+    compiling = torch.compiler.is_compiling()
+    out = []
+    for t in params:
+        t = t if t.dtype == dtype else t.to(dtype)
+        if not compiling and t.dim() == 0 and t.device.type == "cpu" and not (t.requires_grad and
+                                                                               torch.is_grad_enabled()):
+            t = t.item()
+        out.append(t)
+    return type(params)(*out)

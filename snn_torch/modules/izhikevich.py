@@ -33,7 +33,7 @@ from snn_torch.functional.izhikevich import (
 from snn_torch.functional.izhikevich_fused import izhikevich_step_fused
 from snn_torch.functional.threshold import SpikeFn, fast_sigmoid
 from snn_torch.modules._layer import TimeLayer
-from snn_torch.modules._validate import check_state, neuron_parameters
+from snn_torch.modules._validate import check_state, neuron_parameters, params_for_step
 
 __all__ = ["IzhikevichCell", "Izhikevich"]
 
@@ -71,7 +71,8 @@ class _IzhikevichBase(nn.Module):
         return IzhikevichParams(self.a, self.b, self.c, self.d, self.v_peak)
 
     def params_as(self, dtype: torch.dtype) -> IzhikevichParams:
-        return IzhikevichParams(*(t if t.dtype == dtype else t.to(dtype) for t in self.p))
+        """The parameters for a step on ``dtype`` tensors (``params_for_step``)."""
+        return params_for_step(self.p, dtype)
 
     def initial_state(self, like: Tensor) -> IzhikevichState:
         """Start state shaped, typed and placed like ``like`` (``v = v0_mv``, ``u = b v``)."""

@@ -25,7 +25,7 @@ from snn_torch.functional.lif import (
 )
 from snn_torch.functional.threshold import SpikeFn, fast_sigmoid
 from snn_torch.modules._layer import TimeLayer
-from snn_torch.modules._validate import check_state, neuron_parameters
+from snn_torch.modules._validate import check_state, neuron_parameters, params_for_step
 
 __all__ = ["LIFCell", "LIF", "LICell", "LI"]
 
@@ -57,7 +57,7 @@ class _LIFBase(nn.Module):
         return LIFParams(*(getattr(self, f) for f in LIFParams._fields))
 
     def step_params(self, dtype: torch.dtype) -> LIFParams:
-        return LIFParams(*(t if t.dtype == dtype else t.to(dtype) for t in self.p))
+        return params_for_step(self.p, dtype)
 
     def initial_state(self, like: Tensor) -> LIFState:
         """Rest state (``v = v_leak``) shaped, typed and placed like ``like``."""
@@ -137,7 +137,7 @@ class _LIBase(nn.Module):
         return LIParams(*(getattr(self, f) for f in LIParams._fields))
 
     def step_params(self, dtype: torch.dtype) -> LIParams:
-        return LIParams(*(t if t.dtype == dtype else t.to(dtype) for t in self.p))
+        return params_for_step(self.p, dtype)
 
     def initial_state(self, like: Tensor) -> LIState:
         """Rest state (``v = v_leak``) shaped, typed and placed like ``like``."""
