@@ -8,7 +8,9 @@ operations in the same order, so the same bits; tested), but:
   branch for every neuron and selects with ``torch.where``;
 - autograd sees one node per step instead of about 80, and that node keeps only ``v`` and
   Heun's predictor ``v_e`` for the whole layer (``v`` alone for Euler) plus a handful of
-  values for the neurons that spiked. The backward is the exact derivative of the forward
+  values for the neurons that spiked (or, with ``substep_reset=False``, a 0/1 tensor of who
+  did not spike: that reset runs in float arithmetic, which is faster on the CPU than masks
+  and gives the same values, a zero's sign aside). The backward is the exact derivative of the forward
   (checked by ``gradcheck`` in float64 and against autograd of ``izhikevich_step``).
 
 The spike itself stays outside the node: the node returns ``x = v1 - v_peak`` (mV) and the
