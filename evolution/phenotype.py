@@ -55,7 +55,7 @@ from snn_torch.modules.coding import (
 from snn_torch.modules.recurrent import PopulationRecurrentIzhikevich, PopulationRecurrentSigmoid
 
 __all__ = ["SpikingSpec", "SigmoidSpec", "SpikingController", "SigmoidController", "SpikingState",
-           "SigmoidState", "rest_rate_hz", "used_slots", "NEAT_SIGMOID_SLOPE", "ENCODERS", "SPIKING_DECODERS",
+           "SigmoidState", "rest_rate_hz", "used_slots", "local_slots", "NEAT_SIGMOID_SLOPE", "ENCODERS", "SPIKING_DECODERS",
            "SIGMOID_DECODERS", "make_controller", "spiking_config", "SPIKING_SIGMA"]
 
 NEAT_SIGMOID_SLOPE = 4.9  # [NEAT02]
@@ -195,8 +195,25 @@ def _check_layout(config: NEATConfig, genomes: Genomes, observation_size: int, a
         raise ValueError(f"genomes have {genomes.num_nodes} node slots, the config {config.num_nodes}")
 
 
+def local_slots(genomes: Genomes) -> Tensor:
+    """``[G, n]`` int64: the node slots each (flattened) genome uses, ascending, padded with -1 to
+    ``n``, the most any genome uses. Inputs, bias and outputs come first in every genome."""
+    N = genomes.num_nodes
+    node = genomes.node.reshape(-1, N)
+    n = int(node.sum(1).max()) if node.shape[0] else 0
+    order = torch.argsort((~node).to(torch.int8), dim=1, stable=True)[:, :n]  # used slots first, in slot order
+    return torch.where(torch.gather(node, 1, order), order, -1)
+
+
 class _Phenotype(nn.Module):
-    """What both controllers share: the used slots, the genomes' weights over them, the outputs."""
+    """What both controllers share: each genome's own nodes, its weights over them, the outputs.
+
+    Network ``g`` simulates only the nodes genome ``g`` uses, in slot order (``node_slots[g]``),
+    padded to the largest genome's count with nodes that have no synapses: a batch of genomes
+    from many runs, whose hidden nodes sit in different slots, costs what its largest genome
+    does, not the union of their slots. A sum over a genome's nodes meets the same terms in the
+    same order as over its slots (and exact zeros for the rest), so results do not depend on it.
+    """
 
     def __init__(self, genomes: Genomes, config: NEATConfig, observation_size: int, action_size: int) -> None:
         super().__init__()
@@ -204,13 +221,22 @@ class _Phenotype(nn.Module):
         N = genomes.num_nodes
         self.config = config
         self.num_genomes = genomes.num_runs * genomes.pop_size
-        self.nodes = used_slots(genomes)
-        slots = self.nodes
-        self.weight = genomes.weight.reshape(-1, N, N)[:, slots][:, :, slots]
-        self.mask = genomes.enabled.reshape(-1, N, N)[:, slots][:, :, slots]
+        self.nodes = used_slots(genomes)  # slots some genome uses (the columns of a single genome's activity)
+        fixed = config.first_hidden
+        if not bool(genomes.node.reshape(-1, N)[:, :fixed].all()):
+            raise ValueError("every genome must hold its input, bias and output nodes (node[..., :first_hidden])")
+        self.node_slots = slots = local_slots(genomes)  # [G, n]
+        G, n = slots.shape
+        self.num_local = n
+        valid = slots >= 0
+        at = slots.clamp(min=0)
+        W = genomes.weight.reshape(-1, N, N)
+        E = genomes.enabled.reshape(-1, N, N)
+        pick = lambda t: t.gather(1, at.unsqueeze(-1).expand(G, n, N)).gather(2, at.unsqueeze(1).expand(G, n, n))  # noqa: E731
+        self.weight = pick(W)
+        self.mask = pick(E) & valid.unsqueeze(-1) & valid.unsqueeze(1)
         self.sigma = genomes.sigma.reshape(-1)
-        first_out = config.first_output
-        self.outputs = [int(torch.nonzero(slots == first_out + k).flatten()[0]) for k in range(action_size)]
+        self.outputs = [config.first_output + k for k in range(action_size)]  # the same place in every genome
         self.n_in, self.n_bias = config.num_inputs, config.num_bias
 
     def _check_network(self, network: Tensor) -> Tensor:
@@ -251,7 +277,7 @@ class SpikingController(_Phenotype):
         self.network = PopulationRecurrentIzhikevich(
             self.weight, self.mask, spec.neuron, i_background=spec.i_background, synapse_kick_mv=spec.synapse_kick_mv,
             dt_ms=spec.dt_ms, backend=backend)
-        n = len(self.nodes)
+        n = self.num_local
         w_plain = torch.where(self.mask, self.weight, torch.zeros((), dtype=self.weight.dtype, device=self.weight.device))
         self.w_out = w_plain[:, :, self.outputs]  # [G, n, K], the genomes' weights (not kick-scaled)
         if spec.encoder == "current":
@@ -288,7 +314,7 @@ class SpikingController(_Phenotype):
 
     def initial_state(self, network: Tensor) -> SpikingState:
         network = self._check_network(network)
-        B, n = network.shape[0], len(self.nodes)
+        B, n = network.shape[0], self.num_local
         v = torch.empty(B, n, dtype=self.weight.dtype, device=self.weight.device)
         neurons = self.network.initial_state(v)
         keys = None if self.keys is None else self.keys.to(network.device)[network]
@@ -306,7 +332,7 @@ class SpikingController(_Phenotype):
         """One control step from normalised observations ``[B, num_inputs]``: ``(action [B, K],
         state, spike counts [B, n])``. ``state`` is consumed: its tensors may be updated in place
         (the C kernel and the rate window write into them); ``select`` or a clone keeps a copy."""
-        B, n, n_in = obs01.shape[0], len(self.nodes), self.n_in
+        B, n, n_in = obs01.shape[0], self.num_local, self.n_in
         obs01 = obs01 if obs01.dtype == self.weight.dtype else obs01.to(self.weight.dtype)
         if self.network.path(state.neurons) == "kernel":
             return self._act_kernel(obs01.contiguous(), state)
