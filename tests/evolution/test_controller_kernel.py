@@ -94,3 +94,27 @@ def test_rate_control_kernel_refuses_what_it_would_misread():
     with pytest.raises(ValueError, match="N <= 64"):
         RateControlKernel(torch.zeros(1, 65, 65), QIU2019, iconst=torch.zeros(65), w_out=torch.zeros(1, 65, 1),
                           **common)
+
+
+@pytest.mark.parametrize("backend", ["auto", "torch"])
+def test_each_network_simulates_its_own_nodes_and_equals_itself_alone(backend):
+    # Genome g uses hidden slot 3 + g only: the batch's slots are all 3 + 6, each genome's 3 + 1.
+    inputs, outputs, hidden = 2, 1, 6
+    genomes, cfg = _genomes(6, inputs, outputs, hidden, torch.float32, seed=11)
+    node = torch.zeros(1, 6, 9, dtype=torch.bool)
+    node[..., :3] = True
+    node[0, torch.arange(6), 3 + torch.arange(6)] = True
+    conn = genomes.conn & node.unsqueeze(-1) & node.unsqueeze(-2)
+    genomes = type(genomes)(weight=genomes.weight, conn=conn, enabled=conn.clone(), node=node, sigma=genomes.sigma)
+    common = dict(period_s=0.01, action_max=2.0, observation_size=inputs, backend=backend)
+    batch = SpikingController(genomes, cfg, **common)
+    assert batch.num_local == 4 and len(batch.nodes) == 9
+    assert batch.node_slots[:, 3].tolist() == list(range(3, 9))
+    obs = torch.rand(6, 6, inputs, generator=torch.Generator().manual_seed(2))
+    actions, counts, _ = _run(batch, obs, torch.arange(6), 6)
+    for g in range(6):
+        alone = SpikingController(genomes.gather(torch.tensor([[g]])), cfg, **common)
+        a_alone, c_alone, _ = _run(alone, obs[:, g : g + 1], torch.arange(1), 6)
+        assert all(torch.equal(a[g : g + 1], b) for a, b in zip(actions, a_alone, strict=True))
+        assert all(torch.equal(c[g : g + 1], d) for c, d in zip(counts, c_alone, strict=True))
+    assert sum(float(c[:, 3].sum()) for c in counts) > 0  # the hidden neurons took part
