@@ -212,8 +212,10 @@ def _forward(i: Tensor, v: Tensor, u: Tensor, p: IzhikevichParams, dt: float, he
         # give izhikevich_step's values exactly (x * 1 = x, x + 0 = x; nan_to_num makes a NaN v1 reset to c).
         z = x.sign().add_(1.0).clamp_(max=1.0)
         keep = 1.0 - z
-        v1.nan_to_num_(nan=0.0, posinf=0.0, neginf=-math.inf).mul_(keep).add_(z * c)  # -inf never spikes
-        u1.add_(z * d)
+        v1.nan_to_num_(nan=0.0, posinf=0.0, neginf=-math.inf).mul_(keep)  # -inf never spikes
+        # z c is exact (z is 0 or 1), so add_(z, alpha=c), fused or not, rounds like v1 + z * c.
+        v1.add_(z, alpha=c) if isinstance(c, float) else v1.add_(z * c)
+        u1.add_(z, alpha=d) if isinstance(d, float) else u1.add_(z * d)
         return x, v1, u1, (v, ve, keep)
     idx = (x >= 0).view(-1).nonzero().squeeze(1)
     saved: tuple[Tensor, ...] = ()
