@@ -134,6 +134,12 @@ void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *
         T vv[LANES * MAXN], uu[LANES * MAXN], zz[LANES * MAXN], I[LANES * MAXN];               \
         T cnt[LANES * MAXN]; const T *W[LANES];                                                        \
         T *wbuf = (T *)calloc(LANES * np * np, sizeof(T)); /* padding stays 0: no synapses */  \
+        /* Bernoulli draws of a chunk's control step, drawn before its substeps in one flat loop \
+           over counters (vectorised), read back in the substeps: the same draws, compared alike. */ \
+        const int64_t M = substeps * n_src;                                                    \
+        const int bern = !src && n_src;                                                        \
+        unsigned char *draws = bern ? (unsigned char *)malloc(LANES * M) : NULL;               \
+        double *pm = bern ? (double *)malloc(M * sizeof(double)) : NULL;                       \
         memset(vv, 0, sizeof vv); memset(uu, 0, sizeof uu); memset(zz, 0, sizeof zz);          \
         memset(I, 0, sizeof I);                                                                \
         for (int k = 0; k < LANES; ++k) W[k] = wbuf + k * np * np;                             \
@@ -158,13 +164,20 @@ void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *
                 memcpy(I + k * np, iext + r * n, n * sizeof(T));                               \
                 for (int64_t j = 0; j < np; ++j) cnt[k * np + j] = 0;                          \
             }                                                                                  \
+            for (int64_t k = 0; k < lanes && bern; ++k) {                                      \
+                const int64_t r = r0 + k;                                                      \
+                const uint64_t key = (uint64_t)keys[r];                                        \
+                unsigned char *dk = draws + k * M;                                             \
+                for (int64_t m = 0; m < M; ++m) pm[m] = prob[r * n_src + m % n_src];           \
+                for (int64_t m = 0; m < M; ++m)                                                \
+                    dk[m] = uniform01(key, (uint64_t)(base + m)) < pm[m];                      \
+            }                                                                                  \
             for (int64_t q = 0; q < substeps; ++q) {                                           \
                 for (int64_t k = 0; k < lanes && n_src; ++k) {                                 \
                     const int64_t r = r0 + k;                                                  \
                     for (int64_t i = 0; i < n_src; ++i) {                                      \
                         T s = src ? src[(r * substeps + q) * n_src + i]                       \
-                                  : (uniform01((uint64_t)keys[r], (uint64_t)(base + q * n_src + i))  \
-                                     < prob[r * n_src + i] ? (T)1 : (T)0);                   \
+                                  : (draws[k * M + q * n_src + i] ? (T)1 : (T)0);            \
                         zz[k * np + i] = s;                                                    \
                         cnt[k * np + i] += s;                                                  \
                     }                                                                          \
@@ -180,7 +193,7 @@ void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *
                 memcpy(counts + r * n, cnt + k * np, n * sizeof(T));                           \
             }                                                                                  \
         }                                                                                      \
-        free(wbuf);                                                                            \
+        free(wbuf); free(draws); free(pm);                                                     \
     }                                                                                          \
 }
 DEFINE_STEPS(izh_network_steps_f32, izh_f32, float)
