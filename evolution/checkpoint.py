@@ -12,6 +12,8 @@ from typing import Any
 
 import torch
 
+from snn_torch._files import current_umask, file_mode  # noqa: F401 - re-exported (evolution.checkpoint.file_mode)
+
 __all__ = ["CheckpointError", "atomic_write_bytes", "atomic_torch_save", "load_checkpoint_dict", "clean_stale_temps",
            "file_mode",
            "CHECKPOINT_FORMAT", "CHECKPOINT_VERSION"]
@@ -26,26 +28,6 @@ MAGIC = b"SNN-NEAT-CKPT\n"
 
 class CheckpointError(ValueError):
     """A checkpoint or genome file is missing, truncated, corrupted or of another format."""
-
-
-def current_umask() -> int:
-    """The process's umask, read without changing it where Linux shows it (``os.umask`` sets
-    it, and a thread creating a file meanwhile would get the wrong mode)."""
-    try:
-        with open("/proc/self/status", encoding="ascii") as fh:
-            for line in fh:
-                if line.startswith("Umask:"):
-                    return int(line.split()[1], 8)
-    except (OSError, ValueError):
-        pass
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-def file_mode() -> int:
-    """The mode an ordinary new file gets (0o666 less the umask); ``mkstemp`` makes 0o600."""
-    return 0o666 & ~current_umask()
 
 
 # Temp names: mkstemp's ``.NAME.`` + 8 characters of [a-z0-9_] + ``.tmp`` (this module) or

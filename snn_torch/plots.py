@@ -15,6 +15,7 @@ import torch
 from matplotlib.figure import Figure
 from torch import Tensor
 
+from snn_torch._files import file_mode
 from snn_torch.functional.izhikevich import (
     QIU2019,
     QIU2019_FIG1,
@@ -118,6 +119,7 @@ def save_figure(fig: Figure, path: str | os.PathLike, *, dpi: int = 150) -> Path
     try:
         with os.fdopen(fd, "wb") as fh:
             fig.savefig(fh, format="png", dpi=dpi)
+            os.fchmod(fh.fileno(), file_mode())  # as open() would have made it, not mkstemp's 0o600
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
