@@ -25,7 +25,7 @@ unused ones changes nothing, and the result is the same with any thread count.
 
 The C is ``evolution/csrc/breed.c`` (exports declared in ``breed.h``; the draws in
 ``counter_rng.h`` and ``box_muller.h``, the distance in ``gene_distance.h``), built once per
-machine by ``snn_torch._cbuild``; ``SNN_NEAT_FUSED=0`` disables the kernels.
+machine by ``snn_torch._cbuild``; ``SNN_NEAT_C_KERNELS=0`` disables the kernels.
 """
 
 from __future__ import annotations
@@ -112,7 +112,7 @@ def _sfx(dtype: torch.dtype) -> str:
 def _kernels() -> KernelLibrary:
     lib = _library()
     if lib is None:
-        raise RuntimeError("the C breeding kernels are unavailable (no compiler, or SNN_NEAT_FUSED=0); "
+        raise RuntimeError("the C breeding kernels are unavailable (no compiler, or SNN_NEAT_C_KERNELS=0); "
                            "use fused=False")
     return lib
 

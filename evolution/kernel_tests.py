@@ -34,7 +34,7 @@ def gene_distances(a: GeneBits, rows_a: Tensor, b: GeneBits, rows_b: Tensor, cfg
     distance code of ``breed_kernel.assign_species``."""
     lib = library()
     if lib is None:
-        raise RuntimeError("the C test kernels are unavailable (no compiler, or SNN_NEAT_FUSED=0)")
+        raise RuntimeError("the C test kernels are unavailable (no compiler, or SNN_NEAT_C_KERNELS=0)")
     R, Ka = rows_a.shape
     Kb = rows_b.shape[1]
     out = torch.empty(R, Ka, Kb, dtype=torch.float64)

@@ -52,7 +52,7 @@ def kernel_available() -> bool:
 def _require() -> KernelLibrary:
     lib = _library()
     if lib is None:
-        raise RuntimeError("the C selection kernels are unavailable (no compiler, or SNN_NEAT_FUSED=0); "
+        raise RuntimeError("the C selection kernels are unavailable (no compiler, or SNN_NEAT_C_KERNELS=0); "
                            "use fused=False")
     return lib
 
