@@ -99,9 +99,12 @@ class StatisticsReporter(BaseReporter):
             }
 
     def post_reproduction(self, neat: NEAT, info: ReproductionInfo) -> None:
-        refused = info.split_refused.cpu()
-        for r, row in self._pending.items():
-            row["split_refused"] = int(refused[r])
+        # ``info`` has a row per run still evolving (solved runs are frozen, not bred), in run order.
+        refused = info.split_refused.cpu().tolist()
+        evolving = torch.nonzero(neat.active_runs).flatten().tolist()
+        for r, count in zip(evolving, refused, strict=True):
+            if r in self._pending:
+                self._pending[r]["split_refused"] = int(count)
 
     def end_generation(self, neat: NEAT) -> None:
         self.rows.extend(self._pending[r] for r in sorted(self._pending))

@@ -36,7 +36,8 @@ __all__ = ["ReproductionInfo", "allocate_offspring", "share_scale", "reproduce",
 
 @dataclass
 class ReproductionInfo:
-    """What one reproduction step did, per run (``[R]`` tensors)."""
+    """What one reproduction step did, per run bred (``[R']`` tensors: the runs still evolving, in
+    run order; ``NEAT.active_runs`` says which)."""
 
     extinct: Tensor  # bool: every species of the run was removed
     stagnant_removed: Tensor  # long: species removed for stagnation

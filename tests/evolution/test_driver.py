@@ -300,3 +300,20 @@ def test_a_crafted_checkpoint_with_wrong_shapes_is_refused(key, damage, match):
     state["dtype"] = "manual_seed"
     with pytest.raises(CheckpointError, match="not float32 or float64"):
         NEAT.from_state_dict(state, name="crafted")
+
+
+def test_statistics_of_runs_still_evolving_after_one_solved_are_their_own():
+    # Every child tries to add a node and there is one hidden slot: most splits are refused.
+    cfg = small_config(pop_size=12, node_add_prob=1.0, max_hidden=1)
+    solve_run_0 = lambda g, f: torch.zeros_like(f, dtype=torch.bool).index_fill_(0, torch.tensor([0]), True)  # noqa: E731
+    batch = NEAT(cfg, seeds=[1, 2, 3])
+    stats = batch.add_reporter(StatisticsReporter())
+    batch.run(fitness_fn, 4, solved_fn=solve_run_0)  # run 0 solves at once and is frozen
+    alone = NEAT(cfg, seeds=[2, 3])  # runs 1 and 2 evolve as they would alone
+    alone_stats = alone.add_reporter(StatisticsReporter())
+    alone.run(fitness_fn, 4)
+    refused = {(row["generation"], row["run"]): row["split_refused"] for row in stats.rows}
+    for row in alone_stats.rows:
+        assert refused[(row["generation"], row["run"] + 1)] == row["split_refused"]
+    assert all(refused[(g, 0)] == 0 for g in range(4))  # a solved run breeds nothing
+    assert sum(row["split_refused"] for row in alone_stats.rows) > 0  # there was something to count
