@@ -10,7 +10,7 @@ machine is shared.
 
 Norse's Izhikevich steps 0.25 ms (``dt=0.001`` times its hidden ``tau_inv=250``), with forward
 Euler and an end-of-step reset; snn_torch's default steps 0.5 ms with Heun and a sub-step
-reset (see README, "Integration scheme"). ``euler`` rows use Norse's scheme and step.
+reset (see docs/numerics.md, "Integration scheme"). ``euler`` rows use Norse's scheme and step.
 A peer that is not installed is skipped (``pip install -e ".[bench]"`` installs both).
 
     python benchmarks/layers_vs_norse.py [--batches 64 1024] [--sim-ms 25] [--repeats 5]
