@@ -41,7 +41,7 @@ from snn_torch.functional.izhikevich import (
     izhikevich_init,
     izhikevich_run,
 )
-from snn_torch.functional.network_kernel import RateControlKernel, check_network_index
+from snn_torch.functional.network_kernel import RateControlKernel
 from snn_torch.functional.recurrent import RecurrentState
 from snn_torch.modules.coding import (
     BangBang,
@@ -304,13 +304,7 @@ class SpikingController(_Phenotype):
         # input and bias currents of each control step: [n] buffer, bias slots at i_input_max
         self._bias = torch.zeros(n, dtype=self.weight.dtype, device=self.weight.device)
         self._bias[self.n_in : self.n_in + self.n_bias] = spec.i_input_max
-        # The C kernel's constants: every node's constant current (as the network adds the
-        # background to the encoder's currents) and the readout weights, contiguous.
-        self._iconst = self._bias + self.network.i_background
-        self._w_out_c = self.w_out.contiguous()
-        self._gain = spec.i_input_max if spec.encoder == "current" else self.encoder.p_max
-        self._checked: Tensor | None = None  # the last row -> network index checked for the kernel
-        self._kernel: _BoundKernel | None = None
+        self._kernel: _BoundKernel | None = None  # the C kernel's constants, bound at its first step
 
     def initial_state(self, network: Tensor) -> SpikingState:
         network = self._check_network(network)
@@ -365,9 +359,7 @@ class SpikingController(_Phenotype):
         B, n = neurons.v.shape
         if obs01.shape != (B, self.n_in):
             raise ValueError(f"observations must be [{B}, {self.n_in}], got {tuple(obs01.shape)}")
-        if network is not self._checked:  # once per batch of rows: the kernel reads weights by it
-            check_network_index(network, B, self.num_genomes)
-            self._checked = network
+        self.network.check_network_once(network, B)  # the kernel reads weights by it
         v, u, z = neurons
         if not (v.is_contiguous() and u.is_contiguous() and z.is_contiguous() and window.history.is_contiguous()):
             neurons = RecurrentState(*(t.contiguous() for t in neurons))
@@ -393,12 +385,14 @@ class _BoundKernel(NamedTuple):
     draws_per_step: int  # Bernoulli counters per control step
 
 
-
 def _bind_kernel(controller: SpikingController, dtype: torch.dtype) -> _BoundKernel:
     net, spec = controller.network, controller.spec
+    bernoulli = spec.encoder == "bernoulli"
+    # Every node's constant current as the network sees it: the bias nodes' plus the background.
+    iconst = (controller._bias + net.i_background).to(dtype)
     fn = RateControlKernel(net.effective_weight(dtype).contiguous(), net.p, dt_ms=spec.dt_ms,
-                           substeps=controller.substeps, gain=controller._gain, bernoulli=spec.encoder == "bernoulli",
-                           iconst=controller._iconst.to(dtype), w_out=controller._w_out_c.to(dtype),
+                           substeps=controller.substeps, gain=controller.encoder.p_max if bernoulli else spec.i_input_max,
+                           bernoulli=bernoulli, iconst=iconst, w_out=controller.w_out.to(dtype).contiguous(),
                            rest=None if controller.rest is None else controller.rest.to(dtype))
     return _BoundKernel(fn, dtype, controller.window.window, controller.window.period_s,
                         controller.substeps * controller.n_in)

@@ -123,6 +123,14 @@ class _PopulationNetwork(nn.Module):
         self._gathered = (network, w, gathered)
         return gathered
 
+    def check_network_once(self, network: Tensor | None, rows: int) -> None:
+        """``check_network_index`` for the row -> network index ``network`` (None: nothing to
+        check), once per index tensor: a closed loop passes the same one every step until it
+        compacts, and the kernels read weights by it."""
+        if network is not None and network is not self._network_checked:
+            check_network_index(network, rows, self.num_networks)
+            self._network_checked = network
+
     def _check_rows(self, x: Tensor, name: str, network: Tensor | None) -> None:
         if not isinstance(x, Tensor) or x.dim() != 2 or x.shape[-1] != self.num_neurons:
             shape = tuple(x.shape) if isinstance(x, Tensor) else type(x).__name__
@@ -260,9 +268,7 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
         if state.v.shape != i_ext.shape:
             raise ValueError(f"state must be [{i_ext.shape[0]}, {self.num_neurons}] like i_ext, got "
                              f"{tuple(state.v.shape)}")
-        if network is not None and network is not self._network_checked:  # once per batch of rows
-            check_network_index(network, i_ext.shape[0], self.num_networks)
-            self._network_checked = network
+        self.check_network_once(network, i_ext.shape[0])
         if self.i_background:
             i_ext = i_ext + self.i_background
         path = self.path(state)
@@ -336,9 +342,7 @@ class PopulationRecurrentSigmoid(_PopulationNetwork):
         if values is None:
             values = self.initial_state(inputs.shape[0])
         self._check_rows(values, "values", network)
-        if network is not None and network is not self._network_checked:  # once per batch of rows
-            check_network_index(network, values.shape[0], self.num_networks)
-            self._network_checked = network
+        self.check_network_once(network, values.shape[0])
         y = values
         use_kernel = self.backend != "torch" and not self.weight.requires_grad and sigmoid_kernel_supports(values)
         if self.backend == "kernel" and not use_kernel:
