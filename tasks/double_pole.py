@@ -24,7 +24,8 @@ at ``max_steps``), so the seam's return is exactly ``F``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
+from pathlib import Path
 
 import torch
 from torch import Tensor
@@ -32,12 +33,17 @@ from torch import Tensor
 from evolution.phenotype import make_controller
 from evolution.rollout import rollout
 from evolution.task import Task
+from snn_torch._cbuild import library_loader
 
 __all__ = ["DoublePoleParams", "DEFAULT_DOUBLE_POLE", "double_pole_derivatives", "double_pole_step", "generalization_starts",
            "balanced_steps", "champion_solves", "GRUAU_RANGES", "LONG_BALANCE_STEPS", "GENERALIZATION_PASS",
            "double_pole_failed", "DoublePoleTask", "DAMPING_WINDOW"]
 
 DAMPING_WINDOW = 100  # steps in Gruau's damping term
+_CSRC = Path(__file__).resolve().parent / "csrc"
+_kernel = library_loader("double_pole", _CSRC / "double_pole.c", _CSRC / "double_pole.h",
+                         "snn-neat: the double-pole C kernel could not be built; DoublePoleTask steps through torch "
+                         "(about 5x slower per control step on small batches)")
 
 
 @dataclass(frozen=True)
@@ -147,6 +153,7 @@ class DoublePoleTask(Task):
         self.observation_low = tuple(-b for b in bounds)
         self.observation_high = bounds
         self._columns = list(range(6)) if velocities else [0, 2, 4]
+        self._params = torch.tensor(astuple(plant), dtype=torch.float64)  # the C kernel's order
         self.validate()
 
     @classmethod
@@ -174,6 +181,24 @@ class DoublePoleTask(Task):
         return state
 
     def step(self, state: Tensor, action: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """One control step. On the CPU one C call (``tasks/csrc/double_pole.c``: the same
+        operations in the same order; sin and cos are libm's, so states agree with the torch path
+        to rounding, tested); elsewhere, or with ``SNN_NEAT_C_KERNELS=0``, the torch path."""
+        if state.device.type == "cpu" and state.dtype == torch.float64 and _kernel() is not None:
+            return self._step_kernel(state, action)
+        return self._step_torch(state, action)
+
+    def _step_kernel(self, state: Tensor, action: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        state, force = state.contiguous(), action[:, 0].to(torch.float64).contiguous()
+        rows = state.shape[0]
+        out, reward = torch.empty_like(state), torch.empty(rows, dtype=torch.float64)
+        failed = torch.empty(rows, dtype=torch.bool)
+        _kernel().double_pole_step_f64(state.data_ptr(), force.data_ptr(), out.data_ptr(), reward.data_ptr(),
+                                       failed.data_ptr(), rows, DAMPING_WINDOW, self._params.data_ptr(), 2,
+                                       int(self.damping), self.max_steps, torch.get_num_threads())
+        return out, reward, failed
+
+    def _step_torch(self, state: Tensor, action: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         plant = double_pole_step(state[:, :6], action[:, 0].to(torch.float64), self.plant)
         failed = double_pole_failed(plant, self.plant)
         balanced = state[:, 6] + (~failed).to(torch.float64)

@@ -2,7 +2,6 @@
 
 import shutil
 import subprocess
-from pathlib import Path
 
 import pytest
 import torch
@@ -195,16 +194,20 @@ def test_sigmoid_kernel_equals_the_torch_updates_bit_for_bit(dtype, N, clamped, 
 
 
 @pytest.mark.skipif(shutil.which("nm") is None, reason="no nm to list a library's symbols")
-@pytest.mark.parametrize("stem", ["recurrent_izhikevich", "recurrent_sigmoid"])
-def test_network_libraries_export_exactly_what_their_headers_declare(stem):
+@pytest.mark.parametrize("stem", ["recurrent_izhikevich", "recurrent_sigmoid", "double_pole"])
+def test_kernel_libraries_export_exactly_what_their_headers_declare(stem):
     from snn_torch._cbuild import parse_prototypes
     from snn_torch.functional import network_kernel, sigmoid_kernel
+    from tasks import double_pole
 
-    lib = (network_kernel if stem == "recurrent_izhikevich" else sigmoid_kernel)._library()
+    loader, csrc = {"recurrent_izhikevich": (network_kernel._library, network_kernel._CSRC),
+                    "recurrent_sigmoid": (sigmoid_kernel._library, sigmoid_kernel._CSRC),
+                    "double_pole": (double_pole._kernel, double_pole._CSRC)}[stem]
+    lib = loader()
     if lib is None:
         pytest.skip("no C compiler: kernels unavailable")
     out = subprocess.run(["nm", "-D", "--defined-only", str(lib.path)], capture_output=True, text=True,
                          check=True).stdout
     exported = {line.split()[-1] for line in out.splitlines() if line.split()[1:2] == ["T"]}
-    header = Path(network_kernel.__file__).resolve().parent.parent / "csrc" / f"{stem}.h"
+    header = csrc / f"{stem}.h"
     assert exported == set(parse_prototypes(header.read_text()))

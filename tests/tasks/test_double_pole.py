@@ -102,8 +102,10 @@ def _lqr_forces(off_after):
     return forces
 
 
+@pytest.mark.parametrize("c_kernels", ["1", "0"])
 @pytest.mark.parametrize("off_after, outcome", [(1000, "balances"), (300, "falls late"), (0, "falls early")])
-def test_damping_fitness_is_gruaus(off_after, outcome):
+def test_damping_fitness_is_gruaus(off_after, outcome, c_kernels, monkeypatch):
+    monkeypatch.setenv("SNN_NEAT_C_KERNELS", c_kernels)
     forces = _lqr_forces(off_after)
     expected, balanced = _esp_damping_fitness(forces)
     task = DoublePoleTask.without_velocities()
@@ -119,6 +121,34 @@ def test_damping_fitness_is_gruaus(off_after, outcome):
     assert total == pytest.approx(expected, rel=1e-9, abs=1e-12)
     assert {"balances": balanced == 1000, "falls late": 300 <= balanced < 1000,
             "falls early": balanced < 100}[outcome]
+
+
+@pytest.mark.parametrize("velocities", [True, False])
+def test_the_c_step_is_the_torch_step_to_rounding(velocities):
+    """The CPU kernel against the torch definition, step by step from all 625 generalisation
+    starts under the LQR law with noise (a few start states fail, most balance 600 steps)."""
+    from tasks.double_pole import _kernel, generalization_starts
+
+    assert _kernel() is not None, "the C kernel must build here (CI has a C compiler)"
+    task = DoublePoleTask(velocities=velocities, fitness="steps" if velocities else "damping", max_steps=600)
+    gains = torch.tensor(_lqr_gains(), dtype=torch.float64)
+    g = torch.Generator().manual_seed(1)
+    state = task.starts(generalization_starts())
+    alive = torch.ones(625, dtype=torch.bool)
+    paid = torch.zeros(625, dtype=torch.float64)
+    for _ in range(600):
+        force = (-(state[:, :6] @ gains) + torch.randn(625, generator=g, dtype=torch.float64)).clamp(-10, 10)
+        ours, reward, failed = task._step_kernel(state, force.unsqueeze(1))
+        ref, ref_reward, ref_failed = task._step_torch(state, force.unsqueeze(1))
+        assert torch.equal(failed, ref_failed)
+        torch.testing.assert_close(ours, ref, rtol=1e-13, atol=1e-14)
+        torch.testing.assert_close(reward, ref_reward, rtol=1e-13, atol=0.0)
+        paid += torch.where(alive, reward, 0.0)
+        alive &= ~failed
+        state = ref  # both paths continue from the definition's state
+    assert 0 < int(alive.sum()) < 625
+    if not velocities:
+        assert bool((paid[alive] > 0.06).all())  # the 600th step paid Gruau's fitness: 0.1 * 600 / 1000 + a damping term
 
 
 def test_tasks_declare_the_published_setups_and_refuse_bad_ones():
