@@ -126,6 +126,8 @@ class DoublePoleTask(Task):
             other step pays 0, so a rollout must run ``max_steps`` steps, the default).
         max_steps: episode length in control steps.
         plant: constants and limits; theta1_0: the long pole's start angle (rad).
+        observation_bounds: symmetric bounds of each observed variable (m, m/s, rad, rad/s), in
+            place of the defaults below; the seam normalises over them.
 
     Observation bounds (the seam normalises to [0, 1] over them, values beyond saturate): the
     failure limits for x and the angles; +-2 m/s and +-4 rad/s for the velocities (not given by
@@ -137,7 +139,8 @@ class DoublePoleTask(Task):
     X_DOT_BOUND, THETA_DOT_BOUND = 2.0, 4.0
 
     def __init__(self, *, velocities: bool, fitness: str = "steps", max_steps: int = 100_000,
-                 plant: DoublePoleParams = DEFAULT_DOUBLE_POLE, theta1_0: float = 0.07, name: str | None = None) -> None:
+                 plant: DoublePoleParams = DEFAULT_DOUBLE_POLE, theta1_0: float = 0.07, name: str | None = None,
+                 observation_bounds: tuple[float, ...] | None = None) -> None:
         if fitness not in ("steps", "damping"):
             raise ValueError(f"fitness must be 'steps' or 'damping', got {fitness!r}")
         if not (isinstance(theta1_0, (int, float)) and abs(theta1_0) < plant.theta_limit):
@@ -150,11 +153,27 @@ class DoublePoleTask(Task):
         lim_x, lim_th = plant.x_limit, plant.theta_limit
         bounds = ((lim_x, self.X_DOT_BOUND, lim_th, self.THETA_DOT_BOUND, lim_th, self.THETA_DOT_BOUND)
                   if velocities else (lim_x, lim_th, lim_th))
+        if observation_bounds is not None:
+            bounds = tuple(observation_bounds)
+            if len(bounds) != len(self._columns_for(velocities)) or not all(
+                    isinstance(b, (int, float)) and not isinstance(b, bool) and math.isfinite(b) and b > 0
+                    for b in bounds):
+                raise ValueError(f"observation_bounds must be {len(self._columns_for(velocities))} positive finite "
+                                 f"numbers (one per observed variable), got {observation_bounds!r}")
         self.observation_low = tuple(-b for b in bounds)
         self.observation_high = bounds
-        self._columns = list(range(6)) if velocities else [0, 2, 4]
+        self._columns = self._columns_for(velocities)
         self._params = torch.tensor(astuple(plant), dtype=torch.float64)  # the C kernel's order
         self.validate()
+
+    @staticmethod
+    def _columns_for(velocities: bool) -> list[int]:
+        return list(range(6)) if velocities else [0, 2, 4]
+
+    def with_fitness(self, fitness: str, max_steps: int) -> DoublePoleTask:
+        """The same plant, start and observations with another fitness and episode length."""
+        return DoublePoleTask(velocities=self.velocities, fitness=fitness, max_steps=max_steps, plant=self.plant,
+                              theta1_0=self.theta1_0, observation_bounds=tuple(self.observation_high))
 
     @classmethod
     def with_velocities(cls, **kwargs) -> DoublePoleTask:
@@ -238,10 +257,14 @@ def generalization_starts(*, device: torch.device | str = "cpu") -> Tensor:
 
 
 def balanced_steps(genomes, config, kind: str = "snn", spec=None, *, velocities: bool = False,
-                   starts: Tensor | None = None, max_steps: int = GENERALIZATION_STEPS) -> Tensor:
+                   starts: Tensor | None = None, max_steps: int = GENERALIZATION_STEPS,
+                   task: DoublePoleTask | None = None) -> Tensor:
     """Control steps ``[R, P, S]`` (int64) each genome balances from each start (plant states
-    ``[S, 6]``; default the standard start), up to ``max_steps``: one rollout of every genome x start."""
-    task = DoublePoleTask(velocities=velocities, fitness="steps", max_steps=max_steps)
+    ``[S, 6]``; default the standard start), up to ``max_steps``: one rollout of every genome x start.
+    ``task``: the evolved task (its plant, start and observation bounds; default: DPV or DPNV's
+    defaults by ``velocities``)."""
+    task = (DoublePoleTask(velocities=velocities, fitness="steps", max_steps=max_steps) if task is None
+            else task.with_fitness("steps", max_steps))
     if starts is None:
         starts = task.reset(1, None, device=genomes.device)
     else:
@@ -252,18 +275,20 @@ def balanced_steps(genomes, config, kind: str = "snn", spec=None, *, velocities:
 
 
 def champion_solves(genomes, fitness: Tensor, config, kind: str = "snn", spec=None, *, velocities: bool = False,
-                    long_steps: int = LONG_BALANCE_STEPS, min_general: int = GENERALIZATION_PASS) -> Tensor:
+                    long_steps: int = LONG_BALANCE_STEPS, min_general: int = GENERALIZATION_PASS,
+                    task: DoublePoleTask | None = None) -> Tensor:
     """NEAT 2002's test of a generation (a ``solved_fn`` for ``NEAT.run``): each run's champion (by
     ``fitness``) solves when it balances ``long_steps`` steps from the standard start and
     ``min_general`` or more of the 625 generalisation starts for 1000 steps. ``[R, P]`` bool,
     true at the solving champions."""
     best = fitness.argmax(-1, keepdim=True)  # [R, 1]
     champions = genomes.gather(best)
-    long = balanced_steps(champions, config, kind, spec, velocities=velocities, max_steps=long_steps)[:, 0, 0]
+    long = balanced_steps(champions, config, kind, spec, velocities=velocities, max_steps=long_steps,
+                          task=task)[:, 0, 0]
     solved = long >= long_steps
     if bool(solved.any()):  # the 625-start test only for champions that passed the long balance
         general = (balanced_steps(champions, config, kind, spec, velocities=velocities,
-                                  starts=generalization_starts()) >= GENERALIZATION_STEPS).sum(-1)[:, 0]
+                                  starts=generalization_starts(), task=task) >= GENERALIZATION_STEPS).sum(-1)[:, 0]
         solved = solved & (general >= min_general)
     out = torch.zeros(fitness.shape, dtype=torch.bool, device=fitness.device)
     return out.scatter(1, best, solved.unsqueeze(1))

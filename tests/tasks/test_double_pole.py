@@ -200,3 +200,21 @@ def test_generalization_grid_and_the_champion_test():
     assert torch.equal(solved.any(-1), champion_steps >= 60)
     never = champion_solves(genomes, fitness, cfg, long_steps=60, min_general=626)  # more starts than exist
     assert not bool(never.any())
+
+
+def test_observation_bounds_set_the_scaling_and_the_champion_test_uses_them():
+    from evolution.phenotype import SigmoidSpec
+    from tasks.double_pole import balanced_steps
+
+    narrow = DoublePoleTask.with_velocities(observation_bounds=(2.4, 2.0, 0.3, 2.0, 0.3, 4.0), max_steps=300)
+    assert narrow.observation_high == (2.4, 2.0, 0.3, 2.0, 0.3, 4.0) and narrow.observation_low[2] == -0.3
+    for bad in [(1.0, 2.0), (2.4, 2.0, 0.0, 2.0, 0.3, 4.0), (2.4, 2.0, float("nan"), 2.0, 0.3, 4.0)]:
+        with pytest.raises(ValueError, match="observation_bounds"):
+            DoublePoleTask.with_velocities(observation_bounds=bad)
+    cfg = spiking_config(6, pop_size=12, num_bias=1, sigma_mutate_rate=0.0, compatibility_sigma_coefficient=0.0)
+    genomes = NEAT(cfg, seeds=[3]).ask()
+    fit = TaskFitness(narrow, cfg, "sigmoid", SigmoidSpec())(genomes)
+    steps = balanced_steps(genomes, cfg, "sigmoid", SigmoidSpec(), velocities=True, max_steps=300, task=narrow)
+    default = balanced_steps(genomes, cfg, "sigmoid", SigmoidSpec(), velocities=True, max_steps=300)
+    assert torch.equal(steps[..., 0].to(fit.dtype), fit)  # the test sees what evolution saw
+    assert not torch.equal(steps, default)  # and the bounds change what the networks do
