@@ -150,25 +150,21 @@ class DoublePoleTask(Task):
         self.theta1_0, self.max_steps = float(theta1_0), max_steps
         self.control_period_s = 2 * plant.tau_s
         self.name = name or ("double-pole-" + ("velocities" if velocities else "no-velocities"))
+        self._columns = list(range(6)) if velocities else [0, 2, 4]
         lim_x, lim_th = plant.x_limit, plant.theta_limit
         bounds = ((lim_x, self.X_DOT_BOUND, lim_th, self.THETA_DOT_BOUND, lim_th, self.THETA_DOT_BOUND)
                   if velocities else (lim_x, lim_th, lim_th))
         if observation_bounds is not None:
             bounds = tuple(observation_bounds)
-            if len(bounds) != len(self._columns_for(velocities)) or not all(
+            if len(bounds) != len(self._columns) or not all(
                     isinstance(b, (int, float)) and not isinstance(b, bool) and math.isfinite(b) and b > 0
                     for b in bounds):
-                raise ValueError(f"observation_bounds must be {len(self._columns_for(velocities))} positive finite "
+                raise ValueError(f"observation_bounds must be {len(self._columns)} positive finite "
                                  f"numbers (one per observed variable), got {observation_bounds!r}")
         self.observation_low = tuple(-b for b in bounds)
         self.observation_high = bounds
-        self._columns = self._columns_for(velocities)
         self._params = torch.tensor(astuple(plant), dtype=torch.float64)  # the C kernel's order
         self.validate()
-
-    @staticmethod
-    def _columns_for(velocities: bool) -> list[int]:
-        return list(range(6)) if velocities else [0, 2, 4]
 
     def with_fitness(self, fitness: str, max_steps: int) -> DoublePoleTask:
         """The same plant, start and observations with another fitness and episode length."""
