@@ -249,7 +249,7 @@ class NEAT:
             self._report("start_generation")
             genomes = self.ask()
             fitness = self.evaluate_active(fitness_fn, genomes)
-            self.tell(fitness, None if solved_fn is None else solved_fn(genomes, self._check_fitness(fitness)))
+            self.tell(fitness, None if solved_fn is None else self.solved_active(solved_fn, genomes, fitness))
         self._report("end_run")
         return self.result()
 
@@ -272,6 +272,29 @@ class NEAT:
         fitness = self.best_fitness.unsqueeze(1).expand(R, P).clone()
         fitness[idx] = part.to(device=self.device, dtype=fitness.dtype)
         return fitness
+
+    def solved_active(self, solved_fn: Callable[[Genomes, Tensor], Tensor], genomes: Genomes,
+                      fitness: Tensor) -> Tensor:
+        """``solved_fn(genomes, fitness) -> [R, P]`` bool on the unsolved runs only; false for the
+        solved runs, which are frozen (a solved_fn that tests champions at length costs the most
+        on them, and ``tell`` ignores them)."""
+        fitness = self._check_fitness(fitness)
+        active = self.active_runs
+        R, P = self.num_runs, self.config.pop_size
+        if bool(active.all()):
+            part, idx = solved_fn(genomes, fitness), None
+        else:
+            idx = torch.nonzero(active).flatten()
+            part = solved_fn(genomes.select_runs(idx), fitness[idx])
+        if not isinstance(part, Tensor) or part.dtype != torch.bool or tuple(part.shape) != (R if idx is None else len(idx), P):
+            got = (tuple(part.shape), part.dtype) if isinstance(part, Tensor) else type(part).__name__
+            raise FitnessError(f"solved_fn must return a bool tensor [runs, genomes] = "
+                               f"[{R if idx is None else len(idx)}, {P}] for the unsolved runs, got {got}")
+        if idx is None:
+            return part.to(self.device)
+        solved = torch.zeros(R, P, dtype=torch.bool, device=self.device)
+        solved[idx] = part.to(self.device)
+        return solved
 
     def result(self) -> NEATResult:
         return NEATResult(self.best_fitness.clone(), self.best_genomes.clone(), self.solved_generation.clone(),

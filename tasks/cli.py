@@ -12,6 +12,8 @@ from pathlib import Path
 # tasks.experiments.cartpole.GA_CHOICES, spelled out so that --help needs no torch (a test
 # keeps the two equal).
 GA_CHOICES = ("tuned", "neat-c++", "neat-python")
+# tasks.experiments.reproduce.TASKS, likewise.
+TASKS = ("table1", "table2", "dpv", "dpnv")
 
 
 def _positive_float(text: str) -> float:
@@ -367,7 +369,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "checkpoint after every generation. Writes TABLE.md/.csv (best, worst, median, mean with "
                     "failures as GENERATIONS+1, failure rate, Mann-Whitney U p-value), runs.csv, summary.json, "
                     "fig8_best_fitness.png, trajectory and topology plots and every champion genome.")
-    rep.add_argument("table", choices=["table1", "table2"], help="which table to reproduce")
+    rep.add_argument("table", choices=list(TASKS), help="which table to reproduce: the paper's table1 or table2, "
+                     "or beyond the paper, double-pole balancing with (dpv) or without (dpnv) velocities")
     rep.add_argument("--runs", type=_positive_int, default=60, help="runs per controller (default: 60, the paper's)")
     rep.add_argument("--seed", type=_non_negative_int, default=0, help="first seed (default: 0)")
     rep.add_argument("--generations", type=_positive_int, default=100, help="budget per run (default: 100)")

@@ -30,6 +30,7 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
+from evolution.ablation import StaticMapController
 from evolution.phenotype import make_controller
 from evolution.rollout import rollout
 from evolution.task import Task
@@ -254,11 +255,12 @@ def generalization_starts(*, device: torch.device | str = "cpu") -> Tensor:
 
 def balanced_steps(genomes, config, kind: str = "snn", spec=None, *, velocities: bool = False,
                    starts: Tensor | None = None, max_steps: int = GENERALIZATION_STEPS,
-                   task: DoublePoleTask | None = None) -> Tensor:
+                   task: DoublePoleTask | None = None, static_map_steps: int | None = None) -> Tensor:
     """Control steps ``[R, P, S]`` (int64) each genome balances from each start (plant states
     ``[S, 6]``; default the standard start), up to ``max_steps``: one rollout of every genome x start.
     ``task``: the evolved task (its plant, start and observation bounds; default: DPV or DPNV's
-    defaults by ``velocities``)."""
+    defaults by ``velocities``). ``static_map_steps``: run each controller as a memoryless map
+    settled this many control steps per observation (``evolution.ablation.StaticMapController``)."""
     task = (DoublePoleTask(velocities=velocities, fitness="steps", max_steps=max_steps) if task is None
             else task.with_fitness("steps", max_steps))
     if starts is None:
@@ -266,6 +268,8 @@ def balanced_steps(genomes, config, kind: str = "snn", spec=None, *, velocities:
     else:
         starts = task.starts(starts.to(device=genomes.device, dtype=torch.float64))
     controller = make_controller(genomes, config, task, spec, kind=kind)
+    if static_map_steps is not None:
+        controller = StaticMapController(controller, static_map_steps)
     result = rollout(task, controller, episodes=starts.shape[0], starts=starts)
     return result.steps.view(genomes.num_runs, genomes.pop_size, -1)
 

@@ -91,6 +91,12 @@ TUNED_GA: dict[tuple[str, str], tuple[str, dict]] = {
     ("table1", "snn"): ("neat-c++", {}),
     ("table2", "sigmoid"): ("neat-python", {"survival_threshold": 0.1}),
     ("table2", "snn"): ("neat-c++", {}),
+    # double pole (tasks.experiments.double_pole): picked on tuning seeds 5000-5009, 40
+    # generations of DPV; DPNV takes DPV's pick (docs/beyond-the-paper.md)
+    ("dpv", "sigmoid"): ("neat-python", {"survival_threshold": 0.1}),
+    ("dpv", "snn"): ("neat-python", {"survival_threshold": 0.1}),
+    ("dpnv", "sigmoid"): ("neat-python", {"survival_threshold": 0.1}),
+    ("dpnv", "snn"): ("neat-python", {"survival_threshold": 0.1}),
 }
 GA_CHOICES = ("tuned", *GA_PRESETS)
 

@@ -12,6 +12,7 @@ not solve within ``generations`` counts as ``generations + 1`` (the paper's 101)
 
 from __future__ import annotations
 
+import functools
 import os
 import statistics
 import sys
@@ -54,12 +55,27 @@ class Task:
     fitness: Callable[..., Callable[[Genomes], Tensor]]  # (controller, config) -> fitness_fn
     max_steps: int
     tau_s: float
+    # (controller, config) -> solved_fn(genomes, fitness) -> [R, P] bool, or None where the
+    # config's fitness threshold decides
+    solved: Callable[..., Callable[[Genomes, Tensor], Tensor] | None] | None = None
 
 
 def _tasks() -> dict[str, Task]:
     from tasks.experiments import cartpole as cp
+    from tasks.experiments import double_pole as dp
+
+    def study(variant: str, description: str) -> Task:
+        task = dp.study_task(variant)
+        return Task(variant, description, functools.partial(dp.study_config, variant),
+                    functools.partial(dp.study_fitness, variant), task.max_steps, task.plant.tau_s,
+                    functools.partial(dp.study_solved, variant))
 
     return {
+        "dpv": study("dpv", "double-pole balancing with velocities (NEAT 2002): six inputs, +-10 N, population 150, "
+                     "solved when a genome balances 100,000 steps"),
+        "dpnv": study("dpnv", "double-pole balancing without velocities (NEAT 2002): x and both angles, Gruau's "
+                      "damping fitness over 1000 steps, population 1000, solved when a champion balances 100,000 "
+                      "steps and 200 of the 625 generalisation starts"),
         "table1": Task("table1", "Markov cart-pole (Table I): x, x_dot, theta, theta_dot as Bernoulli-coded input "
                        "spikes, bang-bang +-10 N, tau 20 ms, success at 100,000 steps",
                        cp.markov_config, cp.markov_fitness, cp.MARKOV["max_steps"], cp.MARKOV["tau_s"]),
@@ -69,7 +85,7 @@ def _tasks() -> dict[str, Task]:
     }
 
 
-TASKS = ("table1", "table2")
+TASKS = ("table1", "table2", "dpv", "dpnv")
 # Fig. 8 draws solved runs' final best up to the budget, or this many generations where the
 # budget is larger (evolution itself may go on longer; its generations are all drawn).
 FIG8_MAX_PAD = 10_000
@@ -158,6 +174,7 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
         history, wall = [], 0.0
 
     fitness_fn = task.fitness(controller, config)
+    solved_fn = task.solved(controller, config) if task.solved is not None else None
 
     def save() -> None:
         stacked = torch.stack(history) if history else torch.zeros(0, len(seeds), dtype=torch.float64)
@@ -172,14 +189,15 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
             if stop_after is not None and done_here >= stop_after:
                 break
             start = time.perf_counter()
-            fitness = neat.evaluate_active(fitness_fn, neat.ask())
-            neat.tell(fitness)
+            genomes = neat.ask()
+            fitness = neat.evaluate_active(fitness_fn, genomes)
+            neat.tell(fitness, None if solved_fn is None else neat.solved_active(solved_fn, genomes, fitness))
             history.append(neat.best_fitness.detach().cpu().clone())
             wall += time.perf_counter() - start
             done_here += 1
             bar.update(1)
             bar.set_postfix(solved=f"{int((neat.solved_generation > 0).sum())}/{neat.num_runs}",
-                            best=f"{neat.best_fitness.max().item():.0f}")
+                            best=f"{neat.best_fitness.max().item():.4g}")
             finished = neat.generation >= generations or not bool(neat.active_runs.any())
             if neat.generation % checkpoint_every == 0 or finished:
                 save()
@@ -329,6 +347,10 @@ def write_report(results: dict[str, ControllerRuns], table: str, out: str | os.P
     from evolution.genome_io import save_genome
     from tasks.plots import plot_best_fitness_mean_std, plot_episode, plot_topology, plot_trajectory
 
+    if table in ("dpv", "dpnv"):
+        from tasks.experiments.double_pole_report import write_study_report
+
+        return write_study_report(results, table, out, command=command, generalization=generalization)
     out = Path(out)
     for last in (out / f"{table}.md", out / "summary.json"):
         last.unlink(missing_ok=True)

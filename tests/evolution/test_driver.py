@@ -305,7 +305,12 @@ def test_a_crafted_checkpoint_with_wrong_shapes_is_refused(key, damage, match):
 def test_statistics_of_runs_still_evolving_after_one_solved_are_their_own():
     # Every child tries to add a node and there is one hidden slot: most splits are refused.
     cfg = small_config(pop_size=12, node_add_prob=1.0, max_hidden=1)
-    solve_run_0 = lambda g, f: torch.zeros_like(f, dtype=torch.bool).index_fill_(0, torch.tensor([0]), True)  # noqa: E731
+    calls = []
+
+    def solve_run_0(g, f):  # run 0 solves in the first generation; solved_fn sees unsolved runs only
+        calls.append(f.shape[0])
+        return torch.zeros_like(f, dtype=torch.bool).index_fill_(0, torch.tensor([0]), len(calls) == 1)
+
     batch = NEAT(cfg, seeds=[1, 2, 3])
     stats = batch.add_reporter(StatisticsReporter())
     batch.run(fitness_fn, 4, solved_fn=solve_run_0)  # run 0 solves at once and is frozen
@@ -316,4 +321,22 @@ def test_statistics_of_runs_still_evolving_after_one_solved_are_their_own():
     for row in alone_stats.rows:
         assert refused[(row["generation"], row["run"] + 1)] == row["split_refused"]
     assert all(refused[(g, 0)] == 0 for g in range(4))  # a solved run breeds nothing
+    assert calls == [3, 2, 2, 2]  # the frozen run is not judged again
     assert sum(row["split_refused"] for row in alone_stats.rows) > 0  # there was something to count
+
+
+def test_solved_fn_judges_the_unsolved_runs_only_and_its_answer_is_checked():
+    seen = []
+
+    def solve_first_call(g, f):
+        seen.append((g.num_runs, tuple(f.shape)))
+        return torch.full(f.shape, len(seen) == 1 and g.num_runs == 3, dtype=torch.bool) & (
+            torch.arange(f.shape[0]) == 1).unsqueeze(1)
+
+    neat = NEAT(small_config(pop_size=12), seeds=[1, 2, 3])
+    neat.run(fitness_fn, 3, solved_fn=solve_first_call)
+    assert [s[0] for s in seen] == [3, 2, 2]
+    assert neat.solved_generation.tolist() == [-1, 1, -1]
+    bad = NEAT(small_config(pop_size=12), seeds=[1])
+    with pytest.raises(FitnessError, match="solved_fn must return a bool tensor"):
+        bad.run(fitness_fn, 1, solved_fn=lambda g, f: f)  # float-valued answers are refused

@@ -158,6 +158,10 @@ def test_ga_choice_reaches_the_config_and_guards_resume(tmp_path):
     from tasks.cli import GA_CHOICES as CLI_GA_CHOICES
 
     assert CLI_GA_CHOICES == GA_CHOICES
+    from tasks.cli import TASKS as CLI_TASKS
+    from tasks.experiments.reproduce import TASKS
+
+    assert CLI_TASKS == TASKS
     assert parse_value("2", "elitism") == 2 and parse_value("1", "weight_mutate_power") == 1.0
     assert parse_value("true", "weight_mutate_per_gene") is True
     with pytest.raises(ValueError, match="NEATConfig.elitism"):

@@ -1,0 +1,127 @@
+"""The double-pole study: NEAT-SNN and sigmoid NEAT on double-pole balancing as NEAT 2002 ran it.
+
+Two variants (``VARIANTS``), each a ``DoublePoleTask`` through the public seam:
+
+- ``"dpv"``: with velocities; fitness = control steps balanced from the standard start (long
+  pole at 0.07 rad), up to 100,000; a run solves when a genome balances all 100,000.
+  Population 150 ([NEAT02] Sec. 4.1).
+- ``"dpnv"``: without velocities; fitness = Gruau et al.'s damping fitness over 1000 steps;
+  a run solves when its champion of a generation balances 100,000 steps from the standard
+  start and 200 or more of the 625 generalisation starts for 1000 steps ([NEAT02] Sec. 4.2,
+  ``champion_solves``). Population 1000 ([NEAT02]).
+
+A run's score is its evaluations to solve, ``generations x population`` as [NEAT02] counts
+them (the champion tests are not counted, as there).
+
+Observation scaling (the seam normalises to [0, 1] over symmetric bounds): the failure limits
+for x (2.4 m) and +-0.3 rad for the angles, +-2 m/s, +-2 rad/s and +-4 rad/s for the
+velocities. Picked on tuning seeds 5000-5009 (``python -m experiments.double_pole_tune``):
+with the task's default bounds (the 36 degree failure angle for the poles) no sigmoid NEAT run
+balanced DPV beyond 426 steps in 40 generations; with these, runs balance 100,000 steps.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+from torch import Tensor
+
+from evolution.config import NEATConfig
+from evolution.phenotype import SPIKING_SIGMA, SigmoidSpec, SpikingSpec
+from evolution.population import Genomes
+from evolution.rollout import TaskFitness
+from tasks.double_pole import GENERALIZATION_PASS, LONG_BALANCE_STEPS, DoublePoleTask, champion_solves
+from tasks.experiments.cartpole import CONTROLLERS, ga_overrides
+
+__all__ = ["VARIANTS", "POPULATION", "OBSERVATION_BOUNDS", "PUBLISHED", "study_task", "study_spec", "study_config",
+           "study_fitness", "study_solved"]
+
+VARIANTS = ("dpv", "dpnv")
+POPULATION = {"dpv": 150, "dpnv": 1000}  # [NEAT02]
+OBSERVATION_BOUNDS = {"dpv": (2.4, 2.0, 0.3, 2.0, 0.3, 4.0), "dpnv": (2.4, 0.3, 0.3)}  # m, m/s, rad, rad/s
+DPNV_EPISODE_STEPS = 1000  # Gruau's damping fitness is measured over 1000 steps
+
+# Published figures, each with its source. ``evaluations``: mean evaluations to solve;
+# ``generalization``: mean of the 625 starts balanced by the solutions; ``population``.
+# [NEAT02] Stanley & Miikkulainen (2002), Evolutionary Computation 10(2), Tables 1 and 2.
+# [CoSyNE08] Gomez, Schmidhuber & Miikkulainen (2008), JMLR 9, Table 2 (see docs/beyond-the-paper.md).
+PUBLISHED: dict[str, list[dict]] = {
+    "dpv": [
+        {"method": "Ev. Programming", "evaluations": 307_200, "source": "NEAT02 Table 1"},
+        {"method": "Conventional NE", "evaluations": 80_000, "source": "NEAT02 Table 1"},
+        {"method": "SANE", "evaluations": 12_600, "source": "NEAT02 Table 1"},
+        {"method": "ESP", "evaluations": 3_800, "source": "NEAT02 Table 1"},
+        {"method": "NEAT", "evaluations": 3_600, "population": 150, "source": "NEAT02 Table 1"},
+    ],
+    "dpnv": [
+        {"method": "Cellular Encoding", "evaluations": 840_000, "generalization": 300, "population": 16_384,
+         "source": "NEAT02 Table 2"},
+        {"method": "ESP", "evaluations": 169_466, "generalization": 289, "population": 1_000,
+         "source": "NEAT02 Table 2"},
+        {"method": "NEAT", "evaluations": 33_184, "generalization": 286, "population": 1_000,
+         "source": "NEAT02 Table 2"},
+    ],
+}
+
+
+def _check(variant: str, controller: str | None = None) -> None:
+    if variant not in VARIANTS:
+        raise ValueError(f"variant must be one of {VARIANTS}, got {variant!r}")
+    if controller is not None and controller not in CONTROLLERS:
+        raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
+
+
+def study_task(variant: str) -> DoublePoleTask:
+    """The task a ``variant`` evolves on (its fitness, episode length and observation bounds)."""
+    _check(variant)
+    if variant == "dpv":
+        return DoublePoleTask.with_velocities(max_steps=LONG_BALANCE_STEPS, observation_bounds=OBSERVATION_BOUNDS["dpv"])
+    return DoublePoleTask.without_velocities(fitness="damping", max_steps=DPNV_EPISODE_STEPS,
+                                             observation_bounds=OBSERVATION_BOUNDS["dpnv"])
+
+
+def study_spec(variant: str, controller: str) -> SpikingSpec | SigmoidSpec:
+    """The controller's coding: the spiking and sigmoid defaults (continuous force in +-10 N)."""
+    _check(variant, controller)
+    return SpikingSpec() if controller == "snn" else SigmoidSpec()
+
+
+def study_config(variant: str, controller: str, *, self_loops: bool = False, ga: str = "neat-c++",
+                 **overrides) -> NEATConfig:
+    """The NEAT config of ``controller`` on ``variant`` under GA preset ``ga``: the population of
+    [NEAT02], every input wired to the output at the start (plus a bias input for sigmoid NEAT),
+    up to 16 hidden nodes. DPV's threshold is the 100,000-step balance; DPNV has none (its runs
+    solve by ``study_solved``)."""
+    _check(variant, controller)
+    task = study_task(variant)
+    base = dict(num_inputs=task.observation_size, num_outputs=1, pop_size=POPULATION[variant], max_hidden=16,
+                initial_self_loops=self_loops,
+                fitness_threshold=float(LONG_BALANCE_STEPS) if variant == "dpv" else math.inf)
+    if controller == "snn":
+        base.update(num_bias=0, **SPIKING_SIGMA)
+    else:
+        base.update(num_bias=1, sigma_mutate_rate=0.0, compatibility_sigma_coefficient=0.0)
+    base.update(ga_overrides(ga))
+    base.update(overrides)
+    return NEATConfig(**base)
+
+
+def study_fitness(variant: str, controller: str, config: NEATConfig) -> TaskFitness:
+    """``fitness_fn(genomes) -> [R, P]``: steps balanced (DPV) or the damping fitness (DPNV)."""
+    return TaskFitness(study_task(variant), config, controller, study_spec(variant, controller))
+
+
+def study_solved(variant: str, controller: str,
+                 config: NEATConfig) -> Callable[[Genomes, Tensor], Tensor] | None:
+    """NEAT 2002's test of a generation as a ``solved_fn(genomes, fitness) -> [R, P]``, or None
+    where the fitness threshold decides (DPV: a genome balanced the whole 100,000 steps)."""
+    _check(variant, controller)
+    if variant == "dpv":
+        return None
+    task, spec = study_task(variant), study_spec(variant, controller)
+
+    def solved(genomes: Genomes, fitness: Tensor) -> Tensor:
+        return champion_solves(genomes, fitness, config, controller, spec, min_general=GENERALIZATION_PASS, task=task)
+
+    return solved

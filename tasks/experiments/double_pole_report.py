@@ -1,0 +1,225 @@
+"""The double-pole study's report: evaluations to solve beside the published figures, the
+625-start generalisation test, champion sizes and the memory ablation, with plots.
+
+Written by ``snn-neat reproduce dpv|dpnv`` (``tasks.experiments.reproduce.write_report``).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import statistics
+from pathlib import Path
+
+from tasks.double_pole import GENERALIZATION_STEPS, generalization_starts
+from tasks.experiments.double_pole import PUBLISHED, study_spec, study_task
+from tasks.experiments.reproduce import LABELS, ControllerRuns, mann_whitney
+
+__all__ = ["study_rows", "write_study_report", "STATIC_MAP_STEPS"]
+
+STATIC_MAP_STEPS = 20  # control steps (400 ms) a fresh network settles on each observation in the ablation
+
+
+def _champion_tests(r: ControllerRuns, variant: str, generalization: bool) -> dict[str, list[float]]:
+    """Per run: starts of the 625 its champion balances for 1000 steps, as evolved and as a static
+    map, and steps balanced from the standard start (up to 1000) as a static map."""
+    from tasks.double_pole import balanced_steps
+
+    task, spec = study_task(variant), study_spec(variant, r.controller)
+    out: dict[str, list[float]] = {}
+    if not generalization:
+        return out
+    starts = generalization_starts()
+    for name, settle in (("generalization", None), ("generalization_static_map", STATIC_MAP_STEPS)):
+        steps = balanced_steps(r.champions, r.config, r.controller, spec, starts=starts, task=task,
+                               static_map_steps=settle)
+        out[name] = (steps[:, 0] >= GENERALIZATION_STEPS).sum(-1).tolist()
+    steps = balanced_steps(r.champions, r.config, r.controller, spec, task=task, static_map_steps=STATIC_MAP_STEPS)
+    out["standard_start_static_map"] = steps[:, 0, 0].tolist()
+    return out
+
+
+def _mean(values: list[float]) -> float:
+    return statistics.mean(values) if values else math.nan
+
+
+def study_rows(results: dict[str, ControllerRuns], variant: str, *, generalization: bool = True) -> dict:
+    """Each controller's row (evaluations to solve, failures, generalisation, sizes, ablation) and
+    the per-run columns, as one JSON-able dict; the U-test of evaluations when both ran."""
+    rows, per_run = {}, {}
+    for c, r in results.items():
+        pop = r.config.pop_size
+        solved = [g > 0 for g in r.solved_generation]
+        evals = [g * pop for g in r.counted()]  # a failure counts as (budget + 1) x population
+        solved_evals = [e for e, s in zip(evals, solved, strict=True) if s]
+        hidden = (r.champions.node[:, 0].sum(-1) - r.config.num_inputs - r.config.num_bias
+                  - r.config.num_outputs).tolist()
+        conns = r.champions.enabled[:, 0].sum((-1, -2)).tolist()
+        tests = _champion_tests(r, variant, generalization)
+        per_run[c] = {"seed": r.seeds, "solved_generation": r.solved_generation, "evaluations": evals,
+                      "best_fitness": r.best_fitness, "hidden_nodes": hidden, "enabled_connections": conns, **tests}
+        row = {"controller": c, "runs": len(evals), "solved": sum(solved), "failures": len(evals) - sum(solved),
+               "population": pop, "generations": r.generations,
+               "evaluations_mean_solved": _mean(solved_evals),
+               "evaluations_median_solved": statistics.median(solved_evals) if solved_evals else math.nan,
+               "evaluations_best": min(solved_evals) if solved_evals else math.nan,
+               "evaluations_worst": max(solved_evals) if solved_evals else math.nan,
+               "evaluations_mean_all": _mean(evals),
+               "hidden_nodes_mean_solved": _mean([h for h, s in zip(hidden, solved, strict=True) if s]),
+               "connections_mean_solved": _mean([k for k, s in zip(conns, solved, strict=True) if s]),
+               "wall_s": r.wall_s, "ga": r.extra.get("ga", "")}
+        for key in ("generalization", "generalization_static_map"):
+            if key in tests:
+                row[f"{key}_mean_solved"] = _mean([g for g, s in zip(tests[key], solved, strict=True) if s])
+        if "standard_start_static_map" in tests:
+            row["static_map_holds_1000_steps"] = sum(s >= GENERALIZATION_STEPS for s in tests["standard_start_static_map"])
+        rows[c] = row
+    out = {"variant": variant, "rows": rows, "runs": per_run, "published": PUBLISHED[variant]}
+    if "snn" in results and "sigmoid" in results:
+        out["mann_whitney_u"] = mann_whitney(per_run["snn"]["evaluations"], per_run["sigmoid"]["evaluations"])
+    return out
+
+
+def _fmt(value: float, digits: int = 0) -> str:
+    return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value:,.{digits}f}"
+
+
+def format_study_markdown(summary: dict, command: str) -> str:
+    """The study's tables: ours beside the published rows, then generalisation, sizes, ablation."""
+    variant = summary["variant"]
+    title = {"dpv": "Double-pole balancing with velocities (DPV)",
+             "dpnv": "Double-pole balancing without velocities (DPNV, damping fitness)"}[variant]
+    seeds = summary["seeds"]
+    lines = [f"# {title}", "", f"Command: `{command}`", f"Seeds: {seeds[0]}..{seeds[-1]} ({len(seeds)} runs per controller)", "",
+             "| Method | Source | Population | Evaluations to solve (mean over solved runs) | Median | Best | Worst | "
+             "Failures | Generalisation (of 625) |", "|---|---|---|---|---|---|---|---|---|"]
+    for c, row in summary["rows"].items():
+        gen = row.get("generalization_mean_solved")
+        lines.append(f"| {LABELS.get(c, c)} | this code | {row['population']:,} | {_fmt(row['evaluations_mean_solved'])} | "
+                     f"{_fmt(row['evaluations_median_solved'])} | {_fmt(row['evaluations_best'])} | "
+                     f"{_fmt(row['evaluations_worst'])} | {row['failures']}/{row['runs']} | "
+                     f"{_fmt(gen, 1) if gen is not None else '-'} |")
+    for p in summary["published"]:
+        lines.append(f"| {p['method']} | {p['source']} | {_fmt(p.get('population'))} | {p['evaluations']:,} | | | | | "
+                     f"{p.get('generalization', '-')} |")
+    budget = next(iter(summary["rows"].values()))["generations"]
+    lines += ["", f"Evaluations = generations x population, as NEAT 2002 counts them (the champion tests are not "
+              f"counted). A run that does not solve within {budget} generations is a failure; the mean over all "
+              f"runs (failures as {budget + 1} generations) is in summary.json."]
+    if "mann_whitney_u" in summary:
+        mw = summary["mann_whitney_u"]
+        lines.append(f"Mann-Whitney U (two-sided, evaluations, NEAT-SNN vs sigmoid NEAT, failures as budget + 1): "
+                     f"U = {mw['U']:g}, p = {mw['p_value']:.3g}.")
+    lines += ["", "| Controller | Hidden nodes (mean, solved) | Connections (mean, solved) | Generalisation as "
+              f"evolved | as a static map | Static map holds the standard start {GENERALIZATION_STEPS} steps | "
+              "Wall time (s) |", "|---|---|---|---|---|---|---|"]
+    for c, row in summary["rows"].items():
+        lines.append(f"| {LABELS.get(c, c)} | {_fmt(row['hidden_nodes_mean_solved'], 2)} | "
+                     f"{_fmt(row['connections_mean_solved'], 2)} | {_fmt(row.get('generalization_mean_solved', math.nan), 1)} | "
+                     f"{_fmt(row.get('generalization_static_map_mean_solved', math.nan), 1)} | "
+                     f"{row.get('static_map_holds_1000_steps', '-')}/{row['runs']} | {row['wall_s']:.0f} |")
+    lines += ["", f"Generalisation: the 625 start states of Gruau et al. (1996) that a run's champion balances for "
+              f"{GENERALIZATION_STEPS} steps (mean over solved runs). Memory ablation: the same champions run as a "
+              f"static map (every control step from the network's initial state, settled {STATIC_MAP_STEPS} control "
+              "steps on the current observation; evolution.ablation.StaticMapController)."]
+    return "\n".join(lines) + "\n"
+
+
+def _plot_evaluations(summary: dict):
+    """ECDF of evaluations to solve per controller, with the published means as lines."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7, 4), layout="constrained")
+    ax = fig.subplots()
+    for c, runs in summary["runs"].items():
+        solved = sorted(e for e, g in zip(runs["evaluations"], runs["solved_generation"], strict=True) if g > 0)
+        n = len(runs["evaluations"])
+        if solved:
+            ax.step(solved, [(i + 1) / n for i in range(len(solved))], where="post", label=f"{LABELS.get(c, c)} ({len(solved)}/{n} solved)")
+        else:
+            ax.plot([], [], label=f"{LABELS.get(c, c)} (0/{n} solved)")
+    for i, p in enumerate(summary["published"]):
+        ax.axvline(p["evaluations"], color=f"C{i + 2}", ls="--", lw=1, label=f"{p['method']} ({p['source']}): mean")
+    ax.set_xscale("log")
+    ax.set_xlabel("evaluations to solve")
+    ax.set_ylabel("fraction of runs solved")
+    ax.set_ylim(0, 1.02)
+    ax.legend(fontsize=7, loc="upper left")
+    ax.set_title(f"{summary['variant'].upper()}: evaluations to solve over {len(summary['seeds'])} runs")
+    return fig
+
+
+def _plot_generalization(summary: dict):
+    """Per controller: starts of 625 balanced by each champion, as evolved and as a static map."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7, 4), layout="constrained")
+    ax = fig.subplots()
+    names, data = [], []
+    for c, runs in summary["runs"].items():
+        for key, what in (("generalization", "as evolved"), ("generalization_static_map", "static map")):
+            if key in runs:
+                names.append(f"{LABELS.get(c, c)}\n{what}")
+                data.append(runs[key])
+    if data:
+        ax.boxplot(data)
+        ax.set_xticks(range(1, len(names) + 1), names, fontsize=8)
+    ax.axhline(200, color="grey", ls="--", lw=1, label="NEAT 2002's pass mark (200)")
+    ax.set_ylabel("starts balanced for 1000 steps (of 625)")
+    ax.set_title("Generalisation of every run's champion, and the memory ablation")
+    ax.legend(fontsize=8)
+    return fig
+
+
+def write_study_report(results: dict[str, ControllerRuns], variant: str, out: str | os.PathLike, *, command: str,
+                       generalization: bool = True) -> list[Path]:
+    """Write VARIANT.md, runs.csv, summary.json, the fitness, evaluations and generalisation plots,
+    a champion's topology per controller and every champion genome. ``summary.json`` and then
+    ``VARIANT.md`` are written last (removed first): a report with ``VARIANT.md`` is complete."""
+    from evolution.checkpoint import atomic_write_bytes
+    from evolution.genome_io import save_genome
+    from tasks.experiments.reproduce import _example_run, _save_png
+    from tasks.plots import plot_best_fitness_mean_std, plot_topology
+
+    out = Path(out)
+    for last in (out / f"{variant}.md", out / "summary.json"):
+        last.unlink(missing_ok=True)
+    summary = study_rows(results, variant, generalization=generalization)
+    summary["seeds"] = next(iter(results.values())).seeds
+    summary["command"] = command
+    written: list[Path] = []
+
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    keys = ["seed", "solved_generation", "evaluations", "best_fitness", "hidden_nodes", "enabled_connections",
+            "generalization", "generalization_static_map", "standard_start_static_map"]
+    w.writerow(["controller", "run", *keys])
+    for c, runs in summary["runs"].items():
+        for i in range(len(runs["seed"])):
+            w.writerow([c, i, *(runs[k][i] if k in runs else "" for k in keys)])
+    written.append(atomic_write_bytes(out / "runs.csv", buf.getvalue().encode()))
+
+    fig = plot_best_fitness_mean_std({LABELS.get(c, c): r.history.T for c, r in results.items()},
+                                     title=f"{variant.upper()}: best fitness per generation over "
+                                           f"{len(summary['seeds'])} runs")
+    written.append(_save_png(fig, out / "best_fitness.png"))
+    written.append(_save_png(_plot_evaluations(summary), out / "evaluations_to_solve.png"))
+    if generalization:
+        written.append(_save_png(_plot_generalization(summary), out / "generalization.png"))
+    names = {i: n for i, n in enumerate(("x", "ẋ", "θ1", "θ̇1", "θ2", "θ̇2") if variant == "dpv" else ("x", "θ1", "θ2"))}
+    for c, r in results.items():
+        run = _example_run(r)
+        label = f"{LABELS.get(c, c)}, seed {r.seeds[run]}" + (
+            f", solved at generation {r.solved_generation[run]}" if r.solved_generation[run] > 0 else ", not solved")
+        written.append(_save_png(plot_topology(r.champions, r.config, run, 0, labels={**names, r.config.first_output: "F"},
+                                               title=f"Champion topology: {label}"), out / f"topology_{c}.png"))
+        for i, seed in enumerate(r.seeds):
+            written.append(save_genome(out / "champions" / f"{c}_seed{seed}.json", r.champions.select_runs([i]),
+                                       r.config, fitness=r.best_fitness[i]))
+    written.append(atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2, default=float).encode()))
+    written.append(atomic_write_bytes(out / f"{variant}.md", format_study_markdown(summary, command).encode()))
+    return written
+

@@ -1,0 +1,71 @@
+"""The double-pole study (snn-neat reproduce dpv|dpnv): NEAT 2002's setups, its test of a
+solution, evaluations counted as it counts them, and the report."""
+
+import json
+
+import pytest
+import torch
+
+from evolution import NEAT
+from tasks.double_pole import LONG_BALANCE_STEPS
+from tasks.experiments.double_pole import (
+    OBSERVATION_BOUNDS,
+    POPULATION,
+    PUBLISHED,
+    study_config,
+    study_fitness,
+    study_solved,
+    study_task,
+)
+from tasks.experiments.double_pole_report import study_rows, write_study_report
+from tasks.experiments.reproduce import run_controller
+
+
+def test_the_variants_are_neat_2002s_setups():
+    dpv, dpnv = study_task("dpv"), study_task("dpnv")
+    assert dpv.velocities and not dpnv.velocities and dpnv.damping and not dpv.damping
+    assert (dpv.max_steps, dpnv.max_steps) == (LONG_BALANCE_STEPS, 1000)
+    assert dpv.observation_high == OBSERVATION_BOUNDS["dpv"] and dpnv.observation_high == OBSERVATION_BOUNDS["dpnv"]
+    for variant in ("dpv", "dpnv"):
+        for kind in ("snn", "sigmoid"):
+            cfg = study_config(variant, kind)
+            assert cfg.pop_size == POPULATION[variant] and cfg.num_inputs == study_task(variant).observation_size
+            assert cfg.num_bias == (1 if kind == "sigmoid" else 0)
+    assert study_config("dpv", "snn").fitness_threshold == LONG_BALANCE_STEPS  # a full balance solves DPV
+    assert study_solved("dpv", "snn", study_config("dpv", "snn")) is None
+    assert [p["evaluations"] for p in PUBLISHED["dpnv"] if p["method"] == "NEAT"] == [33_184]
+    with pytest.raises(ValueError, match="variant must be one of"):
+        study_task("dpx")
+    with pytest.raises(ValueError, match="controller must be one of"):
+        study_config("dpv", "lstm")
+
+
+def test_dpnv_solves_only_by_the_champion_test():
+    cfg = study_config("dpnv", "sigmoid", pop_size=10)
+    neat = NEAT(cfg, seeds=[1, 2])
+    genomes = neat.ask()
+    fitness = study_fitness("dpnv", "sigmoid", cfg)(genomes)
+    assert fitness.shape == (2, 10) and float(fitness.max()) < 0.1  # damping fitness: t / 1000 / 10 early on
+    solved = study_solved("dpnv", "sigmoid", cfg)(genomes, fitness)
+    assert solved.shape == (2, 10) and solved.dtype == torch.bool and not bool(solved.any())
+
+
+def test_reproduce_dpv_writes_the_study_report(tmp_path):
+    out = tmp_path / "dpv"
+    results = {c: run_controller("dpv", c, [0, 1], 2, out, progress=False, ga="neat-c++") for c in ("snn", "sigmoid")}
+    r = results["sigmoid"]
+    assert r.config.pop_size == 150 and r.history.shape == (2, 2)
+    r.solved_generation = [2, -1]  # pretend run 0 solved at generation 2, to check the counting
+    summary = study_rows(results, "dpv", generalization=False)
+    row = summary["rows"]["sigmoid"]
+    assert summary["runs"]["sigmoid"]["evaluations"] == [300, 450]  # generations x 150, failure as budget + 1
+    assert (row["solved"], row["failures"], row["evaluations_mean_solved"]) == (1, 1, 300)
+    paths = write_study_report(results, "dpv", out, command="test", generalization=True)
+    names = {p.name for p in paths}
+    assert {"dpv.md", "summary.json", "runs.csv", "best_fitness.png", "evaluations_to_solve.png",
+            "generalization.png", "topology_snn.png", "sigmoid_seed1.json"} <= names
+    md = (out / "dpv.md").read_text()
+    assert "| NEAT | NEAT02 Table 1 | 150 | 3,600 |" in md and "| NEAT original (sigmoid) | this code | 150 | 300 |" in md
+    saved = json.loads((out / "summary.json").read_text())
+    assert len(saved["runs"]["snn"]["generalization"]) == 2
+    assert all(0 <= g <= 625 for g in saved["runs"]["snn"]["generalization_static_map"])
