@@ -1,10 +1,11 @@
 """First look at evolving double-pole controllers on tuning seeds (5000 + i), before the 60-seed study.
 
-    python -m experiments.double_pole_tune --kind sigmoid --seeds 10 --gens 40
-    python -m experiments.double_pole_tune --kind sigmoid --seeds 10 --gens 40 --bounds "[2.4,2,0.3,2,0.3,4]"
+    python -m experiments.double_pole_tune --kind snn --seeds 10 --gens 40
+    python -m experiments.double_pole_tune --kind sigmoid --seeds 10 --gens 40 --ga neat-c++ --bounds "[2.4,1,0.26,1,0.26,1]"
 
 Prints each run's best fitness (control steps on DPV, Gruau's fitness on DPNV) every generation.
-``--bounds`` replaces the task's observation bounds (the seam normalises over them), ``--cfg``
+Defaults: the study's settings (``tasks.experiments.double_pole``). ``--bounds`` replaces the
+task's observation bounds (the seam normalises over them), ``--cfg``
 and ``--spec`` take JSON overrides of the NEAT config and the controller spec.
 A run is solved by NEAT 2002's test (``champion_solves`` on the same task): on DPV its champion
 balances 100,000 steps, on DPNV also 200 of the 625 generalisation starts; solved runs freeze.
@@ -15,14 +16,14 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from dataclasses import replace
 
 import torch
 
 from evolution import NEAT, TaskFitness
-from evolution.config import NEATConfig
-from evolution.phenotype import SPIKING_SIGMA, SigmoidSpec, SpikingSpec
 from tasks.double_pole import DoublePoleTask, champion_solves
-from tasks.experiments.cartpole import ga_overrides
+from tasks.experiments.cartpole import ga_choice
+from tasks.experiments.double_pole import study_config, study_spec, study_task
 
 
 def main() -> None:
@@ -31,26 +32,22 @@ def main() -> None:
     p.add_argument("--task", default="dpv", choices=("dpv", "dpnv"))
     p.add_argument("--seeds", type=int, default=8)
     p.add_argument("--gens", type=int, default=30)
-    p.add_argument("--pop", type=int, default=150)
-    p.add_argument("--ga", default="neat-c++")
+    p.add_argument("--pop", type=int, default=None, help="population (default: the study's, 150 DPV / 1000 DPNV)")
+    p.add_argument("--ga", default="tuned", help="GA preset, or 'tuned': the study's pick (TUNED_GA)")
     p.add_argument("--cfg", default="{}")
     p.add_argument("--spec", default="{}")
     p.add_argument("--bounds", default=None, help="JSON list of symmetric observation bounds")
     a = p.parse_args()
     torch.set_num_threads(1)
     velocities = a.task == "dpv"
-    bounds = None if a.bounds is None else tuple(json.loads(a.bounds))
-    task = (DoublePoleTask.with_velocities if velocities else DoublePoleTask.without_velocities)(
-        observation_bounds=bounds)
-    base = dict(num_inputs=task.observation_size, num_outputs=1, pop_size=a.pop, max_hidden=16)
-    if a.kind == "snn":
-        base.update(num_bias=0, **SPIKING_SIGMA)
-    else:
-        base.update(num_bias=1, sigma_mutate_rate=0.0, compatibility_sigma_coefficient=0.0)
-    base.update(ga_overrides(a.ga))
-    base.update(json.loads(a.cfg))
-    cfg = NEATConfig(**base)
-    spec = (SpikingSpec if a.kind == "snn" else SigmoidSpec)(**json.loads(a.spec))
+    task = study_task(a.task)
+    if a.bounds is not None:
+        task = DoublePoleTask(velocities=velocities, fitness="steps" if velocities else "damping",
+                              max_steps=task.max_steps, observation_bounds=tuple(json.loads(a.bounds)))
+    preset, extra = ga_choice(a.task, a.kind, a.ga)
+    cfg = study_config(a.task, a.kind, ga=preset, **extra, **({} if a.pop is None else {"pop_size": a.pop}),
+                       **json.loads(a.cfg))
+    spec = replace(study_spec(a.task, a.kind), **json.loads(a.spec))
     fitness = TaskFitness(task, cfg, a.kind, spec)
     neat = NEAT(cfg, seeds=list(range(5000, 5000 + a.seeds)))
     t0 = time.time()
@@ -59,8 +56,9 @@ def main() -> None:
             break
         genomes = neat.ask()
         f = neat.evaluate_active(fitness, genomes)
-        neat.tell(f, champion_solves(genomes, f, cfg, a.kind, spec, velocities=velocities,
-                                     min_general=0 if velocities else 200, task=task))
+        solved = None if velocities else neat.solved_active(  # DPV: a full balance (the config's threshold)
+            lambda g, fit: champion_solves(g, fit, cfg, a.kind, spec, task=task), genomes, f)
+        neat.tell(f, solved)
         best = [round(float(b), 3) for b in f.max(1).values]
         print(gen + 1, f"{time.time() - t0:.0f}s", "active", int(neat.active_runs.sum()), "best", best, flush=True)
 

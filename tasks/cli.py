@@ -363,12 +363,16 @@ def build_parser() -> argparse.ArgumentParser:
     evo.set_defaults(func=_cmd_evolve)
 
     rep = sub.add_parser(
-        "reproduce", help="reproduce the paper's Table I or II (NEAT-SNN vs sigmoid NEAT, many seeded runs)",
-        description="Reproduce Qiu et al.'s Table I (Markov cart-pole) or Table II (non-Markov): RUNS seeded runs "
-                    "(seeds SEED..SEED+RUNS-1) of each controller, all runs of a controller in one batch, with a "
-                    "checkpoint after every generation. Writes TABLE.md/.csv (best, worst, median, mean with "
-                    "failures as GENERATIONS+1, failure rate, Mann-Whitney U p-value), runs.csv, summary.json, "
-                    "fig8_best_fitness.png, trajectory and topology plots and every champion genome.")
+        "reproduce", help="reproduce the paper's Table I or II, or run the double-pole study (NEAT-SNN vs sigmoid "
+                          "NEAT, many seeded runs)",
+        description="Reproduce Qiu et al.'s Table I (Markov cart-pole) or Table II (non-Markov), or run the "
+                    "double-pole study beyond the paper (dpv: with velocities, dpnv: without, as NEAT 2002): RUNS "
+                    "seeded runs (seeds SEED..SEED+RUNS-1) of each controller, all runs of a controller in one "
+                    "batch, with a checkpoint after every generation. Tables: TABLE.md/.csv (best, worst, median, "
+                    "mean with failures as GENERATIONS+1, failure rate, Mann-Whitney U p-value), runs.csv, "
+                    "summary.json, fig8_best_fitness.png, trajectory and topology plots and every champion genome. "
+                    "Double pole: VARIANT.md (evaluations to solve beside the published figures, generalisation, "
+                    "champion sizes, memory ablation), runs.csv, summary.json, plots and every champion genome.")
     rep.add_argument("table", choices=list(TASKS), help="which table to reproduce: the paper's table1 or table2, "
                      "or beyond the paper, double-pole balancing with (dpv) or without (dpnv) velocities")
     rep.add_argument("--runs", type=_positive_int, default=60, help="runs per controller (default: 60, the paper's)")
