@@ -22,7 +22,6 @@ import torch
 
 from evolution import NEAT, TaskFitness
 from tasks.double_pole import DoublePoleTask, champion_solves
-from tasks.experiments.cartpole import ga_choice
 from tasks.experiments.double_pole import study_config, study_spec, study_task
 
 
@@ -44,9 +43,7 @@ def main() -> None:
     if a.bounds is not None:
         task = DoublePoleTask(velocities=velocities, fitness="steps" if velocities else "damping",
                               max_steps=task.max_steps, observation_bounds=tuple(json.loads(a.bounds)))
-    preset, extra = ga_choice(a.task, a.kind, a.ga)
-    cfg = study_config(a.task, a.kind, ga=preset, **extra, **({} if a.pop is None else {"pop_size": a.pop}),
-                       **json.loads(a.cfg))
+    cfg = study_config(a.task, a.kind, ga=a.ga, **({} if a.pop is None else {"pop_size": a.pop}), **json.loads(a.cfg))
     spec = replace(study_spec(a.task, a.kind), **json.loads(a.spec))
     fitness = TaskFitness(task, cfg, a.kind, spec)
     neat = NEAT(cfg, seeds=list(range(5000, 5000 + a.seeds)))

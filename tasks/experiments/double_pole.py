@@ -33,7 +33,7 @@ from evolution.phenotype import SPIKING_SIGMA, SigmoidSpec, SpikingSpec
 from evolution.population import Genomes
 from evolution.rollout import TaskFitness
 from tasks.double_pole import GENERALIZATION_PASS, LONG_BALANCE_STEPS, DoublePoleTask, champion_solves
-from tasks.experiments.cartpole import CONTROLLERS, ga_overrides
+from tasks.experiments.cartpole import CONTROLLERS, ga_choice, ga_overrides
 
 __all__ = ["VARIANTS", "POPULATION", "OBSERVATION_BOUNDS", "PUBLISHED", "study_task", "study_spec", "study_config",
            "study_fitness", "study_solved"]
@@ -93,13 +93,16 @@ def study_spec(variant: str, controller: str) -> SpikingSpec | SigmoidSpec:
     return SpikingSpec(rest_relative=True, rate_window_steps=1) if controller == "snn" else SigmoidSpec()
 
 
-def study_config(variant: str, controller: str, *, self_loops: bool = False, ga: str = "neat-c++",
+def study_config(variant: str, controller: str, *, self_loops: bool = False, ga: str = "tuned",
                  **overrides) -> NEATConfig:
-    """The NEAT config of ``controller`` on ``variant`` under GA preset ``ga``: the population of
-    [NEAT02], every input wired to the output at the start (plus a bias input for sigmoid NEAT),
-    up to 16 hidden nodes. DPV's threshold is the 100,000-step balance; DPNV has none (its runs
-    solve by ``study_solved``)."""
+    """The NEAT config of ``controller`` on ``variant`` under GA preset ``ga`` (default: the
+    study's pick, ``TUNED_GA``): the population of [NEAT02], every input wired to the output at
+    the start (plus a bias input for sigmoid NEAT), up to 16 hidden nodes. DPV's threshold is the
+    100,000-step balance; DPNV has none (its runs solve by ``study_solved``)."""
     _check(variant, controller)
+    if ga == "tuned":
+        ga, extra = ga_choice(variant, controller)
+        overrides = {**extra, **overrides}
     task = study_task(variant)
     base = dict(num_inputs=task.observation_size, num_outputs=1, pop_size=POPULATION[variant], max_hidden=16,
                 initial_self_loops=self_loops,

@@ -31,6 +31,7 @@ def test_the_variants_are_neat_2002s_setups():
             cfg = study_config(variant, kind)
             assert cfg.pop_size == POPULATION[variant] and cfg.num_inputs == study_task(variant).observation_size
             assert cfg.num_bias == (1 if kind == "sigmoid" else 0)
+            assert cfg.survival_threshold == 0.1 and cfg.weight_mutate_per_gene  # the tuned GA by default
     assert study_config("dpv", "snn").fitness_threshold == LONG_BALANCE_STEPS  # a full balance solves DPV
     assert study_solved("dpv", "snn", study_config("dpv", "snn")) is None
     assert [p["evaluations"] for p in PUBLISHED["dpnv"] if p["method"] == "NEAT"] == [33_184]
