@@ -76,17 +76,24 @@ def plot_best_fitness_mean_std(curves: dict[str, Tensor | np.ndarray], *, max_fi
     return fig
 
 
-def plot_trajectory(x_m: Tensor, theta_rad: Tensor, force_n: Tensor | None, *, tau_s: float,
+def plot_trajectory(x_m: Tensor, theta_rad: Tensor | dict[str, Tensor], force_n: Tensor | None, *, tau_s: float,
                     title: str = "") -> Figure:
-    """Cart position (m), pole angle (deg) and, if given, force (N) against time (s)."""
+    """Cart position (m), pole angle (deg) and, if given, force (N) against time (s).
+    ``theta_rad``: one pole's angle, or ``{label: angle}`` for several poles (one axis, a legend)."""
     rows = 3 if force_n is not None else 2
     fig = Figure(figsize=(7, 1.9 * rows + 0.6), layout="constrained")
     axes = fig.subplots(rows, 1, sharex=True)
     t = np.arange(1, len(x_m) + 1) * tau_s
     axes[0].plot(t, x_m.cpu().numpy(), color="tab:blue", lw=0.8)
     axes[0].set_ylabel("cart position x (m)")
-    axes[1].plot(t, np.degrees(theta_rad.cpu().numpy()), color="tab:orange", lw=0.8)
-    axes[1].set_ylabel("pole angle θ (deg)")
+    if isinstance(theta_rad, dict):
+        for i, (label, angle) in enumerate(theta_rad.items()):
+            axes[1].plot(t, np.degrees(angle.cpu().numpy()), color=f"C{i + 1}", lw=0.8, label=label)
+        axes[1].legend(fontsize=8)
+        axes[1].set_ylabel("pole angles (deg)")
+    else:
+        axes[1].plot(t, np.degrees(theta_rad.cpu().numpy()), color="tab:orange", lw=0.8)
+        axes[1].set_ylabel("pole angle θ (deg)")
     if force_n is not None:
         axes[2].plot(t, force_n.cpu().numpy(), color="tab:green", lw=0.6)
         axes[2].set_ylabel("force F (N)")

@@ -20,6 +20,7 @@ from tasks.experiments.reproduce import LABELS, ControllerRuns, mann_whitney
 
 __all__ = ["study_rows", "write_study_report", "STATIC_MAP_STEPS"]
 
+EPISODE_PLOT_STEPS = 1000  # control steps of a champion's episode drawn in trajectory_*.png
 STATIC_MAP_STEPS = 20  # control steps (400 ms) a fresh network settles on each observation in the ablation
 
 
@@ -174,10 +175,25 @@ def _plot_generalization(summary: dict):
     return fig
 
 
+def _plot_episode(r: ControllerRuns, variant: str, run: int, label: str):
+    """Run ``run``'s champion from the standard start for up to 1000 steps, recorded."""
+    from evolution.phenotype import make_controller
+    from evolution.rollout import rollout
+    from tasks.plots import plot_trajectory
+
+    task = study_task(variant).with_fitness("steps", EPISODE_PLOT_STEPS)
+    one = r.champions.select_runs([run])
+    controller = make_controller(one, r.config, task, study_spec(variant, r.controller), kind=r.controller)
+    trace = rollout(task, controller, record=True).trace
+    state, force = trace["state"][:, 0], trace["action"][:, 0, 0]
+    return plot_trajectory(state[:, 0], {"θ1 (long pole)": state[:, 2], "θ2 (short pole)": state[:, 4]}, force,
+                           tau_s=task.control_period_s, title=f"{label}: the first {len(force)} steps")
+
+
 def write_study_report(results: dict[str, ControllerRuns], variant: str, out: str | os.PathLike, *, command: str,
                        generalization: bool = True) -> list[Path]:
     """Write VARIANT.md, runs.csv, summary.json, the fitness, evaluations and generalisation plots,
-    a champion's topology per controller and every champion genome. ``summary.json`` and then
+    a champion's topology and episode per controller and every champion genome. ``summary.json`` and then
     ``VARIANT.md`` are written last (removed first): a report with ``VARIANT.md`` is complete."""
     from evolution.checkpoint import atomic_write_bytes
     from evolution.genome_io import save_genome
@@ -216,6 +232,7 @@ def write_study_report(results: dict[str, ControllerRuns], variant: str, out: st
             f", solved at generation {r.solved_generation[run]}" if r.solved_generation[run] > 0 else ", not solved")
         written.append(_save_png(plot_topology(r.champions, r.config, run, 0, labels={**names, r.config.first_output: "F"},
                                                title=f"Champion topology: {label}"), out / f"topology_{c}.png"))
+        written.append(_save_png(_plot_episode(r, variant, run, label), out / f"trajectory_{c}.png"))
         for i, seed in enumerate(r.seeds):
             written.append(save_genome(out / "champions" / f"{c}_seed{seed}.json", r.champions.select_runs([i]),
                                        r.config, fitness=r.best_fitness[i]))

@@ -64,7 +64,7 @@ def test_reproduce_dpv_writes_the_study_report(tmp_path):
     paths = write_study_report(results, "dpv", out, command="test", generalization=True)
     names = {p.name for p in paths}
     assert {"dpv.md", "summary.json", "runs.csv", "best_fitness.png", "evaluations_to_solve.png",
-            "generalization.png", "topology_snn.png", "sigmoid_seed1.json"} <= names
+            "generalization.png", "topology_snn.png", "trajectory_sigmoid.png", "sigmoid_seed1.json"} <= names
     md = (out / "dpv.md").read_text()
     assert "| NEAT | NEAT02 Table 1 | 150 | 3,600 |" in md and "| NEAT original (sigmoid) | this code | 150 | 300 |" in md
     saved = json.loads((out / "summary.json").read_text())
