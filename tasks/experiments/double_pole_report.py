@@ -25,8 +25,8 @@ STATIC_MAP_STEPS = 20  # control steps (400 ms) a fresh network settles on each 
 
 
 def _champion_tests(r: ControllerRuns, variant: str, generalization: bool) -> dict[str, list[float]]:
-    """Per run: starts of the 625 its champion balances for 1000 steps, as evolved and as a static
-    map, and steps balanced from the standard start (up to 1000) as a static map."""
+    """Per run: starts of the 625 its champion balances for 1000 steps, and steps balanced from the
+    standard start (up to 1000), each as evolved and as a static map."""
     from tasks.double_pole import balanced_steps
 
     task, spec = study_task(variant), study_spec(variant, r.controller)
@@ -38,8 +38,9 @@ def _champion_tests(r: ControllerRuns, variant: str, generalization: bool) -> di
         steps = balanced_steps(r.champions, r.config, r.controller, spec, starts=starts, task=task,
                                static_map_steps=settle)
         out[name] = (steps[:, 0] >= GENERALIZATION_STEPS).sum(-1).tolist()
-    steps = balanced_steps(r.champions, r.config, r.controller, spec, task=task, static_map_steps=STATIC_MAP_STEPS)
-    out["standard_start_static_map"] = steps[:, 0, 0].tolist()
+    for name, settle in (("standard_start", None), ("standard_start_static_map", STATIC_MAP_STEPS)):
+        steps = balanced_steps(r.champions, r.config, r.controller, spec, task=task, static_map_steps=settle)
+        out[name] = steps[:, 0, 0].tolist()
     return out
 
 
@@ -72,11 +73,15 @@ def study_rows(results: dict[str, ControllerRuns], variant: str, *, generalizati
                "hidden_nodes_mean_solved": _mean([h for h, s in zip(hidden, solved, strict=True) if s]),
                "connections_mean_solved": _mean([k for k, s in zip(conns, solved, strict=True) if s]),
                "wall_s": r.wall_s, "ga": r.extra.get("ga", "")}
+        row["hidden_nodes_mean_all"], row["connections_mean_all"] = _mean(hidden), _mean(conns)
         for key in ("generalization", "generalization_static_map"):
             if key in tests:
                 row[f"{key}_mean_solved"] = _mean([g for g, s in zip(tests[key], solved, strict=True) if s])
-        if "standard_start_static_map" in tests:
-            row["static_map_holds_1000_steps"] = sum(s >= GENERALIZATION_STEPS for s in tests["standard_start_static_map"])
+                row[f"{key}_mean_all"] = _mean(tests[key])
+        for key, name in (("standard_start", "holds_1000_steps"), ("standard_start_static_map",
+                                                                   "static_map_holds_1000_steps")):
+            if key in tests:
+                row[name] = sum(s >= GENERALIZATION_STEPS for s in tests[key])
         rows[c] = row
     out = {"variant": variant, "rows": rows, "runs": per_run, "published": PUBLISHED[variant]}
     if "snn" in results and "sigmoid" in results:
@@ -86,6 +91,11 @@ def study_rows(results: dict[str, ControllerRuns], variant: str, *, generalizati
 
 def _fmt(value: float, digits: int = 0) -> str:
     return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value:,.{digits}f}"
+
+
+def _pair(row: dict, key: str, digits: int = 1) -> str:
+    """``"mean over all runs / mean over solved runs"`` of ``key``."""
+    return f"{_fmt(row.get(key + '_mean_all', math.nan), digits)} / {_fmt(row.get(key + '_mean_solved', math.nan), digits)}"
 
 
 def format_study_markdown(summary: dict, command: str) -> str:
@@ -114,16 +124,17 @@ def format_study_markdown(summary: dict, command: str) -> str:
         mw = summary["mann_whitney_u"]
         lines.append(f"Mann-Whitney U (two-sided, evaluations, NEAT-SNN vs sigmoid NEAT, failures as budget + 1): "
                      f"U = {mw['U']:g}, p = {mw['p_value']:.3g}.")
-    lines += ["", "| Controller | Hidden nodes (mean, solved) | Connections (mean, solved) | Generalisation as "
-              f"evolved | as a static map | Static map holds the standard start {GENERALIZATION_STEPS} steps | "
-              "Wall time (s) |", "|---|---|---|---|---|---|---|"]
+    lines += ["", "Champions of every run (all runs / solved runs):", "",
+              "| Controller | Hidden nodes | Connections | Generalisation as evolved | as a static map | "
+              f"Hold the standard start {GENERALIZATION_STEPS} steps: as evolved | as a static map | Wall time (s) |",
+              "|---|---|---|---|---|---|---|---|"]
     for c, row in summary["rows"].items():
-        lines.append(f"| {LABELS.get(c, c)} | {_fmt(row['hidden_nodes_mean_solved'], 2)} | "
-                     f"{_fmt(row['connections_mean_solved'], 2)} | {_fmt(row.get('generalization_mean_solved', math.nan), 1)} | "
-                     f"{_fmt(row.get('generalization_static_map_mean_solved', math.nan), 1)} | "
+        lines.append(f"| {LABELS.get(c, c)} | {_pair(row, 'hidden_nodes', 2)} | {_pair(row, 'connections', 2)} | "
+                     f"{_pair(row, 'generalization')} | {_pair(row, 'generalization_static_map')} | "
+                     f"{row.get('holds_1000_steps', '-')}/{row['runs']} | "
                      f"{row.get('static_map_holds_1000_steps', '-')}/{row['runs']} | {row['wall_s']:.0f} |")
     lines += ["", f"Generalisation: the 625 start states of Gruau et al. (1996) that a run's champion balances for "
-              f"{GENERALIZATION_STEPS} steps (mean over solved runs). Memory ablation: the same champions run as a "
+              f"{GENERALIZATION_STEPS} steps (mean). Memory ablation: the same champions run as a "
               f"static map (every control step from the network's initial state, settled {STATIC_MAP_STEPS} control "
               "steps on the current observation; evolution.ablation.StaticMapController)."]
     return "\n".join(lines) + "\n"
@@ -211,7 +222,7 @@ def write_study_report(results: dict[str, ControllerRuns], variant: str, out: st
     buf = io.StringIO()
     w = csv.writer(buf)
     keys = ["seed", "solved_generation", "evaluations", "best_fitness", "hidden_nodes", "enabled_connections",
-            "generalization", "generalization_static_map", "standard_start_static_map"]
+            "generalization", "generalization_static_map", "standard_start", "standard_start_static_map"]
     w.writerow(["controller", "run", *keys])
     for c, runs in summary["runs"].items():
         for i in range(len(runs["seed"])):

@@ -70,3 +70,6 @@ def test_reproduce_dpv_writes_the_study_report(tmp_path):
     saved = json.loads((out / "summary.json").read_text())
     assert len(saved["runs"]["snn"]["generalization"]) == 2
     assert all(0 <= g <= 625 for g in saved["runs"]["snn"]["generalization_static_map"])
+    steps = saved["runs"]["sigmoid"]["standard_start"]  # the champions' balance, up to 1000 steps
+    assert steps == [min(int(f), 1000) for f in saved["runs"]["sigmoid"]["best_fitness"]]
+    assert "Hold the standard start 1000 steps" in md
