@@ -286,10 +286,11 @@ class NEAT:
         else:
             idx = torch.nonzero(active).flatten()
             part = solved_fn(genomes.select_runs(idx), fitness[idx])
-        if not isinstance(part, Tensor) or part.dtype != torch.bool or tuple(part.shape) != (R if idx is None else len(idx), P):
+        rows = R if idx is None else len(idx)
+        if not isinstance(part, Tensor) or part.dtype != torch.bool or tuple(part.shape) != (rows, P):
             got = (tuple(part.shape), part.dtype) if isinstance(part, Tensor) else type(part).__name__
-            raise FitnessError(f"solved_fn must return a bool tensor [runs, genomes] = "
-                               f"[{R if idx is None else len(idx)}, {P}] for the unsolved runs, got {got}")
+            raise FitnessError(f"solved_fn must return a bool tensor [runs, genomes] = [{rows}, {P}] for the "
+                               f"unsolved runs, got {got}")
         if idx is None:
             return part.to(self.device)
         solved = torch.zeros(R, P, dtype=torch.bool, device=self.device)

@@ -57,9 +57,7 @@ def study_rows(results: dict[str, ControllerRuns], variant: str, *, generalizati
         solved = [g > 0 for g in r.solved_generation]
         evals = [g * pop for g in r.counted()]  # a failure counts as (budget + 1) x population
         solved_evals = [e for e, s in zip(evals, solved, strict=True) if s]
-        hidden = (r.champions.node[:, 0].sum(-1) - r.config.num_inputs - r.config.num_bias
-                  - r.config.num_outputs).tolist()
-        conns = r.champions.enabled[:, 0].sum((-1, -2)).tolist()
+        hidden, conns = r.champion_sizes()
         tests = _champion_tests(r, variant, generalization)
         per_run[c] = {"seed": r.seeds, "solved_generation": r.solved_generation, "evaluations": evals,
                       "best_fitness": r.best_fitness, "hidden_nodes": hidden, "enabled_connections": conns, **tests}
@@ -69,17 +67,13 @@ def study_rows(results: dict[str, ControllerRuns], variant: str, *, generalizati
                "evaluations_median_solved": statistics.median(solved_evals) if solved_evals else math.nan,
                "evaluations_best": min(solved_evals) if solved_evals else math.nan,
                "evaluations_worst": max(solved_evals) if solved_evals else math.nan,
-               "evaluations_mean_all": _mean(evals),
-               "hidden_nodes_mean_solved": _mean([h for h, s in zip(hidden, solved, strict=True) if s]),
-               "connections_mean_solved": _mean([k for k, s in zip(conns, solved, strict=True) if s]),
-               "wall_s": r.wall_s, "ga": r.extra.get("ga", "")}
-        row["hidden_nodes_mean_all"], row["connections_mean_all"] = _mean(hidden), _mean(conns)
-        for key in ("generalization", "generalization_static_map"):
-            if key in tests:
-                row[f"{key}_mean_solved"] = _mean([g for g, s in zip(tests[key], solved, strict=True) if s])
-                row[f"{key}_mean_all"] = _mean(tests[key])
-        for key, name in (("standard_start", "holds_1000_steps"), ("standard_start_static_map",
-                                                                   "static_map_holds_1000_steps")):
+               "evaluations_mean_all": _mean(evals), "wall_s": r.wall_s, "ga": r.extra.get("ga", "")}
+        for key, values in (("hidden_nodes", hidden), ("connections", conns), *(
+                (k, tests[k]) for k in ("generalization", "generalization_static_map") if k in tests)):
+            row[f"{key}_mean_all"] = _mean(values)
+            row[f"{key}_mean_solved"] = _mean([v for v, s in zip(values, solved, strict=True) if s])
+        for key, name in (("standard_start", "holds_1000_steps"),
+                          ("standard_start_static_map", "static_map_holds_1000_steps")):
             if key in tests:
                 row[name] = sum(s >= GENERALIZATION_STEPS for s in tests[key])
         rows[c] = row

@@ -106,6 +106,12 @@ class ControllerRuns:
     wall_s: float
     extra: dict = field(default_factory=dict)
 
+    def champion_sizes(self) -> tuple[list[int], list[int]]:
+        """Each run's champion: hidden nodes and enabled connections."""
+        c = self.config
+        hidden = self.champions.node[:, 0].sum(-1) - c.num_inputs - c.num_bias - c.num_outputs
+        return hidden.tolist(), self.champions.enabled[:, 0].sum((-1, -2)).tolist()
+
     def counted(self) -> list[int]:
         """Solving generation per run, failures as ``generations + 1``."""
         return [g if g > 0 else self.generations + 1 for g in self.solved_generation]
@@ -345,9 +351,10 @@ def write_report(results: dict[str, ControllerRuns], table: str, out: str | os.P
 
     from evolution.checkpoint import atomic_write_bytes
     from evolution.genome_io import save_genome
+    from tasks.experiments.double_pole import VARIANTS
     from tasks.plots import plot_best_fitness_mean_std, plot_episode, plot_topology, plot_trajectory
 
-    if table in ("dpv", "dpnv"):
+    if table in VARIANTS:
         from tasks.experiments.double_pole_report import write_study_report
 
         return write_study_report(results, table, out, command=command, generalization=generalization)
@@ -391,8 +398,7 @@ def write_report(results: dict[str, ControllerRuns], table: str, out: str | os.P
     w.writerow(["controller", "run", "seed", "solved_generation", "counted_generations", "best_fitness",
                 "hidden_nodes", "enabled_connections", "generalization"])
     for c, r in results.items():
-        hidden = (r.champions.node[:, 0].sum(-1) - r.config.num_inputs - r.config.num_bias - r.config.num_outputs)
-        conns = r.champions.enabled[:, 0].sum((-1, -2))
+        hidden, conns = r.champion_sizes()
         gen = r.extra.get("generalization", [""] * len(r.seeds))
         for i, seed in enumerate(r.seeds):
             w.writerow([c, i, seed, r.solved_generation[i], r.counted()[i], r.best_fitness[i], int(hidden[i]),
