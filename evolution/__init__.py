@@ -21,12 +21,12 @@ from evolution.phenotype import (
 from evolution.population import Genomes, check_invariants
 from evolution.reporters import BaseReporter, Checkpointer, StatisticsReporter, StdOutReporter, TqdmReporter
 from evolution.rollout import RolloutResult, TaskFitness, episode_starts, evaluate, rollout
-from evolution.task import Task, TaskError
+from evolution.task import NativeStep, Task, TaskError
 
 __all__ = [
     "NEAT", "NEATConfig", "NEATResult", "Genomes", "ConfigError", "CheckpointError", "FitnessError",
     "BaseReporter", "Checkpointer", "StatisticsReporter", "StdOutReporter", "TqdmReporter",
     "check_invariants", "load_genome", "save_genome", "to_networkx",
-    "Task", "TaskError", "TaskFitness", "RolloutResult", "rollout", "evaluate", "episode_starts",
+    "Task", "TaskError", "NativeStep", "TaskFitness", "RolloutResult", "rollout", "evaluate", "episode_starts",
     "SpikingSpec", "SigmoidSpec", "SpikingController", "SigmoidController", "make_controller", "rest_rate_hz", "spiking_config",
 ]

@@ -43,6 +43,7 @@ from snn_torch.functional.izhikevich import (
 )
 from snn_torch.functional.network_kernel import RateControlKernel
 from snn_torch.functional.recurrent import RecurrentState
+from snn_torch.functional.scalars import scalar
 from snn_torch.modules.coding import (
     BangBang,
     BernoulliEncoder,
@@ -385,15 +386,37 @@ class _BoundKernel(NamedTuple):
     draws_per_step: int  # Bernoulli counters per control step
 
 
-def _bind_kernel(controller: SpikingController, dtype: torch.dtype) -> _BoundKernel:
+class KernelConstants(NamedTuple):
+    """What a spiking controller's C kernels need, in one dtype: effective weights ``[G, n, n]``,
+    every node's constant current ``iconst [n]`` (mV/ms: the bias nodes' plus the background),
+    the encoder's ``gain`` (current: mV/ms at input 1; Bernoulli: spike probability per substep at
+    input 1), readout weights ``w_out [G, n, K]`` and ``rest [n]`` rates (Hz) or None."""
+
+    w_eff: Tensor
+    iconst: Tensor
+    gain: float
+    bernoulli: bool
+    w_out: Tensor
+    rest: Tensor | None
+
+
+def kernel_constants(controller: SpikingController, dtype: torch.dtype) -> KernelConstants:
+    """The controller's ``KernelConstants`` in ``dtype`` (contiguous): the control step's kernel
+    (``RateControlKernel``) and the episode loop (``evolution.episodes``) bind the same ones."""
     net, spec = controller.network, controller.spec
     bernoulli = spec.encoder == "bernoulli"
-    # Every node's constant current as the network sees it: the bias nodes' plus the background.
     iconst = (controller._bias + net.i_background).to(dtype)
-    fn = RateControlKernel(net.effective_weight(dtype).contiguous(), net.p, dt_ms=spec.dt_ms,
-                           substeps=controller.substeps, gain=controller.encoder.p_max if bernoulli else spec.i_input_max,
-                           bernoulli=bernoulli, iconst=iconst, w_out=controller.w_out.to(dtype).contiguous(),
-                           rest=None if controller.rest is None else controller.rest.to(dtype))
+    return KernelConstants(net.effective_weight(dtype).contiguous(), iconst,
+                           controller.encoder.p_max if bernoulli else spec.i_input_max, bernoulli,
+                           controller.w_out.to(dtype).contiguous(),
+                           None if controller.rest is None else controller.rest.to(dtype))
+
+
+def _bind_kernel(controller: SpikingController, dtype: torch.dtype) -> _BoundKernel:
+    net, spec = controller.network, controller.spec
+    k = kernel_constants(controller, dtype)
+    fn = RateControlKernel(k.w_eff, net.p, dt_ms=spec.dt_ms, substeps=controller.substeps, gain=k.gain,
+                           bernoulli=k.bernoulli, iconst=k.iconst, w_out=k.w_out, rest=k.rest)
     return _BoundKernel(fn, dtype, controller.window.window, controller.window.period_s,
                         controller.substeps * controller.n_in)
 
@@ -432,8 +455,8 @@ class SigmoidController(_Phenotype):
         y = self.network.control_step(obs01.to(self.weight.dtype), state.values, updates=self.spec.updates_per_step,
                                       network=state.network)
         out = y[:, self.outputs]
-        if self.spec.decoder == "bang_bang":
-            action = torch.where(out > 0.5, self.action_max, -self.action_max).to(out.dtype)
+        if self.spec.decoder == "bang_bang":  # +-action_max rounded to the dtype, as the episode loop's
+            action = torch.where(out > 0.5, scalar(self.action_max, out), scalar(-self.action_max, out))
         else:
             action = self.action_max * (2.0 * out - 1.0)
         return action, SigmoidState(state.network, y), y

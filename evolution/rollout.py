@@ -6,7 +6,9 @@ time: observe, normalise to [0, 1] over the task's bounds, act (network state ca
 control steps), step the plant. A row that terminates stops counting and its plant state is
 frozen; when fewer than ``compact_below`` of the rows still in the batch are alive, the
 finished ones are dropped (plant and controller state), so they stop costing compute. No
-Python loop over genomes, episodes or neurons.
+Python loop over genomes, episodes or neurons. Where the task has a native step and the
+controller a C kernel, whole episodes run in one native call instead (``evolution.episodes``,
+the same bits), and the loop here (traces, other controllers) steps the plant natively.
 
 ``TaskFitness`` turns a task into NEAT's ``fitness_fn(genomes) -> [R, P]``: the mean over
 episodes of the return or the steps survived (``task.fitness``). Start states come from
@@ -26,6 +28,8 @@ import torch
 from torch import Tensor
 
 from evolution.config import NEATConfig
+from evolution.episodes import native_rollout
+from evolution.native_plant import native_plant
 from evolution.phenotype import SigmoidSpec, SpikingSpec, make_controller
 from evolution.population import Genomes
 from evolution.task import Task, TaskError
@@ -97,7 +101,7 @@ def episode_starts(task: Task, episodes: int, seed: int, *, device: torch.device
 
 
 def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=None, max_steps: int | None = None,
-            record: bool = False, compact_below: float = 0.5) -> RolloutResult:
+            record: bool = False, compact_below: float = 0.5, native: bool = True) -> RolloutResult:
     """Run every genome of ``controller`` on ``task`` for ``episodes`` episodes, as one batch.
 
     Args:
@@ -109,6 +113,8 @@ def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=
         max_steps: episode length (default ``task.max_steps``).
         record: keep a trace of every control step (no compaction; for plots).
         compact_below: drop finished rows when fewer than this fraction of the batch is alive.
+        native: run whole episodes natively where possible (``evolution.episodes``; False: this
+            Python loop, e.g. to compare: the results are the same bits).
 
     Returns:
         ``RolloutResult`` with ``[G, episodes]`` returns and steps.
@@ -130,6 +136,16 @@ def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=
     alive = torch.ones(B, dtype=torch.bool, device=device)
     if isinstance(state, Tensor):
         _check_finite(task, "reset()", "state", state, alive, rows, episodes)
+    if native and not record:  # whole episodes natively where the task and controller allow (the same bits)
+        native = native_rollout(task, controller, starts, episodes=episodes, max_steps=max_steps)
+        if native is not None:
+            returns, steps = native
+            return RolloutResult(returns.view(G, episodes), steps.view(G, episodes),
+                                 (steps < max_steps).view(G, episodes))
+    plant = native_plant(task, state.dtype) if isinstance(state, Tensor) else None
+    if plant is not None and not plant.accepts(state):
+        plant = None
+    observe, step = (task.observe, task.step) if plant is None else (plant.observe, plant.step)
     cstate = controller.initial_state(torch.div(rows, episodes, rounding_mode="floor"))
     low, high = task.bounds(device=device, dtype=dtype)
     span = high - low
@@ -142,12 +158,12 @@ def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=
         if record else None
     compacted, every_row_alive, n_rows = False, True, B
     for _ in range(max_steps):
-        obs = task.observe(state)
+        obs = observe(state)
         _check_batch(task, "observe()", "observation", obs, n_rows, (n_obs,))
         obs01 = ((obs if obs.dtype == dtype else obs.to(dtype)) - low) / span
         obs01 = torch.clamp(obs01, zero, one)
         action, cstate, activity = controller.act(obs01, cstate)
-        new_state, reward, terminated = task.step(state, action)
+        new_state, reward, terminated = step(state, action)
         _check_batch(task, "step()", "reward", reward, n_rows, ())
         _check_batch(task, "step()", "terminated", terminated, n_rows, ())
         if terminated.dtype != torch.bool:

@@ -21,6 +21,12 @@ operations over the leading batch axis; no Python loop over rows.
 
 Bad output from a task (a wrong shape, NaN or inf) is caught at the seam and raised as
 ``TaskError`` naming the task, the method and field, and the (genome, episode) indices.
+
+Optionally, ``native``: a ``NativeStep`` naming a C source that defines the same step and
+observation natively (the ABI: ``snn_torch/csrc/native_plant.h``). With it, and a controller
+with a C kernel, the rollout runs whole episodes in one native call (``evolution.episodes``);
+the torch methods stay the definition (the native step is checked against them, bit for bit,
+when it is bound) and the path on other devices, with no compiler, or when tracing.
 """
 
 from __future__ import annotations
@@ -28,11 +34,13 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
 
 import torch
 from torch import Tensor
 
-__all__ = ["Task", "TaskError", "FITNESS_KINDS"]
+__all__ = ["Task", "TaskError", "FITNESS_KINDS", "NativeStep"]
 
 FITNESS_KINDS = ("return", "steps")
 State = Tensor | tuple[Tensor, ...]
@@ -41,6 +49,37 @@ State = Tensor | tuple[Tensor, ...]
 class TaskError(ValueError):
     """A task returned something malformed (shape, dtype, NaN or inf); the message says which
     task, method, field and batch indices."""
+
+
+@dataclass(frozen=True)
+class NativeStep:
+    """A task's step and observation in C (``snn_torch/csrc/native_plant.h``).
+
+    Attributes:
+        source: the C file defining ``{prefix}_step_{f32,f64}`` and ``{prefix}_observe_{f32,f64}``
+            for each dtype in ``dtypes`` (built once per machine by ``snn_torch._cbuild``; it may
+            ``#include "native_plant.h"`` and ``"portable_math.h"``).
+        prefix: the functions' common prefix (a C identifier).
+        state_width: columns of the task's ``[B, state_width]`` state tensor.
+        params: the task's constants, handed to every call as ``const double *params``.
+        dtypes: the state dtypes the source defines, ``"float32"`` and/or ``"float64"``.
+    """
+
+    source: Path
+    prefix: str
+    state_width: int
+    params: tuple[float, ...] = ()
+    dtypes: tuple[str, ...] = ("float32", "float64")
+
+    def __post_init__(self) -> None:
+        if not str(self.prefix).isidentifier():
+            raise ValueError(f"NativeStep.prefix must be a C identifier, got {self.prefix!r}")
+        if isinstance(self.state_width, bool) or not isinstance(self.state_width, int) or self.state_width < 1:
+            raise ValueError(f"NativeStep.state_width must be a positive int, got {self.state_width!r}")
+        if not self.dtypes or any(d not in ("float32", "float64") for d in self.dtypes):
+            raise ValueError(f"NativeStep.dtypes must list 'float32' and/or 'float64', got {self.dtypes!r}")
+        if not all(isinstance(p, (int, float)) and not isinstance(p, bool) and math.isfinite(p) for p in self.params):
+            raise ValueError("NativeStep.params must be finite numbers")
 
 
 class Task(ABC):
@@ -54,6 +93,7 @@ class Task(ABC):
     max_steps: int = 1000
     control_period_s: float = 0.02
     fitness: str = "return"
+    native: NativeStep | None = None  # the step in C, for whole episodes in one native call
 
     @property
     def observation_size(self) -> int:
@@ -100,6 +140,10 @@ class Task(ABC):
         """``(low, high)`` observation bounds as ``[observation_size]`` tensors."""
         return (torch.tensor(list(self.observation_low), dtype=dtype, device=device),
                 torch.tensor(list(self.observation_high), dtype=dtype, device=device))
+
+    def __getstate__(self) -> dict:
+        # the bound native plant (ctypes functions, evolution.native_plant) is rebuilt where unpickled
+        return {k: v for k, v in self.__dict__.items() if k != "_native_plants"}
 
     def __repr__(self) -> str:
         return (f"{type(self).__name__}(name={self.name!r}, observations={self.observation_size}, "

@@ -190,10 +190,10 @@ def _compile(name: str, files: dict[str, str], main: str, cc: str) -> Path | Non
     return build if isinstance(build, Path) else build.finish()
 
 
-def _library_files(source: Path, header: Path) -> dict[str, str]:
+def _library_files(source: Path, header: Path | None) -> dict[str, str]:
     """``source``, ``header`` and the local headers they include, transitively (name -> text)."""
     files: dict[str, str] = {}
-    pending = [source, header]
+    pending = [source] if header is None else [source, header]
     while pending:
         path = pending.pop()
         if path.name in files:
@@ -204,7 +204,7 @@ def _library_files(source: Path, header: Path) -> dict[str, str]:
     return files
 
 
-def load_library(name: str, source: Path, header: Path) -> KernelLibrary | None:
+def load_library(name: str, source: Path, header: Path | str) -> KernelLibrary | None:
     """The kernel library built from ``source`` (which includes ``header``), or None.
 
     None: no compiler, the build failed, the cache is unwritable, or kernels are disabled
@@ -213,9 +213,10 @@ def load_library(name: str, source: Path, header: Path) -> KernelLibrary | None:
     return load_libraries([(name, source, header)])[0]
 
 
-def load_libraries(specs: Sequence[tuple[str, Path, Path]]) -> list[KernelLibrary | None]:
+def load_libraries(specs: Sequence[tuple[str, Path, Path | str]]) -> list[KernelLibrary | None]:
     """``load_library`` for each ``(name, source, header)``; those not yet built compile side by
-    side (one compiler each, so a cold start waits for the slowest, not the sum)."""
+    side (one compiler each, so a cold start waits for the slowest, not the sum). ``header`` may
+    be the prototypes' text instead of a file (the native plants' generated declarations)."""
     if not kernels_enabled():
         return [None] * len(specs)
     if all(name in _cache for name, _, _ in specs):  # the kernels' every call: no lock
@@ -231,8 +232,9 @@ def load_libraries(specs: Sequence[tuple[str, Path, Path]]) -> list[KernelLibrar
             if cc is None:
                 continue
             try:
-                files = _library_files(source, header)
-                started[name] = (_start(name, files, source.name, cc), files[header.name])
+                files = _library_files(source, header if isinstance(header, Path) else None)
+                prototypes = files[header.name] if isinstance(header, Path) else header
+                started[name] = (_start(name, files, source.name, cc), prototypes)
             except OSError as exc:  # unreadable sources, unwritable cache: fall back and say why
                 _unavailable(name, exc)
         running = [build for build, _ in started.values() if isinstance(build, _Build)]

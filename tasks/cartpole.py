@@ -14,17 +14,20 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import torch
 from torch import Tensor
 
-from evolution.task import Task
+from evolution.task import NativeStep, Task
+from snn_torch.functional.portable_math import sin_cos
 from snn_torch.functional.scalars import scalars
 
 __all__ = ["CartPoleParams", "DEFAULT_PLANT", "PlantError", "cartpole_step", "cartpole_failed", "check_state", "X", "X_DOT",
            "THETA", "THETA_DOT", "CartPoleTask", "X_DOT_LIMIT", "THETA_DOT_LIMIT", "THETA0_RAD"]
 
 X, X_DOT, THETA, THETA_DOT = 0, 1, 2, 3
+_CSRC = Path(__file__).resolve().parent / "csrc"
 
 
 class PlantError(FloatingPointError):
@@ -64,7 +67,7 @@ def cartpole_step(state: Tensor, force: Tensor, tau: float, p: CartPoleParams = 
     mpl, neg_total, pos_total, gravity, half_length, four_thirds, mass_ratio, tau_t = scalars(
         (p.pole_mass * p.half_length, -total, total, p.gravity, p.half_length, 4.0 / 3.0, p.pole_mass / total,
          float(tau)), state)
-    sin, cos = torch.sin(theta), torch.cos(theta)
+    sin, cos = sin_cos(theta)  # one definition for torch and the native step (portable_math)
     w2_sin = theta_dot * theta_dot * sin
     temp = (force + mpl * w2_sin) / neg_total  # = (-F - m l w^2 sin) / (m_c + m)
     theta_acc = (gravity * sin + cos * temp) / (half_length * (four_thirds - mass_ratio * (cos * cos)))
@@ -134,6 +137,10 @@ class CartPoleTask(Task):
         self.control_period_s, self.max_steps, self.plant = float(tau_s), int(max_steps), plant
         self.theta0_rad, self.name = float(theta0_rad), name
         self._columns: dict[torch.device, Tensor] = {}
+        # the same step in C (tasks/csrc/cartpole.c), for whole episodes in one native call
+        self.native = NativeStep(_CSRC / "cartpole.c", "cartpole", 4, params=(
+            plant.gravity, plant.cart_mass, plant.pole_mass, plant.half_length, plant.x_limit, plant.theta_limit,
+            self.control_period_s, len(self.observe_idx), *self.observe_idx))
         self.validate()
 
     @classmethod

@@ -33,8 +33,9 @@ from torch import Tensor
 from evolution.ablation import StaticMapController
 from evolution.phenotype import make_controller
 from evolution.rollout import rollout
-from evolution.task import Task
-from snn_torch._cbuild import library_loader
+from evolution.task import NativeStep, Task
+from snn_torch.functional.decode import ordered_sum
+from snn_torch.functional.portable_math import sin_cos
 
 __all__ = ["DoublePoleParams", "DEFAULT_DOUBLE_POLE", "double_pole_derivatives", "double_pole_step", "generalization_starts",
            "balanced_steps", "champion_solves", "GRUAU_RANGES", "LONG_BALANCE_STEPS", "GENERALIZATION_PASS",
@@ -42,9 +43,6 @@ __all__ = ["DoublePoleParams", "DEFAULT_DOUBLE_POLE", "double_pole_derivatives",
 
 DAMPING_WINDOW = 100  # steps in Gruau's damping term
 _CSRC = Path(__file__).resolve().parent / "csrc"
-_kernel = library_loader("double_pole", _CSRC / "double_pole.c", _CSRC / "double_pole.h",
-                         "snn-neat: the double-pole C kernel could not be built; DoublePoleTask steps through torch "
-                         "(about 5x slower per control step on small batches)")
 
 
 @dataclass(frozen=True)
@@ -80,7 +78,7 @@ def double_pole_derivatives(state: Tensor, force: Tensor, p: DoublePoleParams = 
     """``d state / dt`` ``[B, 6]`` under ``force`` (N, ``[B]``): Wieland's equations as ESP writes them."""
     _, x_dot, th1, th1_dot, th2, th2_dot = state.unbind(-1)
     g = -p.gravity  # ESP's sign convention: gravity -9.8, angles positive the same way as x
-    cos1, sin1, cos2, sin2 = torch.cos(th1), torch.sin(th1), torch.cos(th2), torch.sin(th2)
+    (sin1, cos1), (sin2, cos2) = sin_cos(th1), sin_cos(th2)  # portable_math: the C step's bits
     ml1, ml2 = p.pole1_half_length * p.pole1_mass, p.pole2_half_length * p.pole2_mass
     temp1, temp2 = p.pole_friction * th1_dot / ml1, p.pole_friction * th2_dot / ml2
     g_sin1, g_sin2 = g * sin1, g * sin2
@@ -164,7 +162,9 @@ class DoublePoleTask(Task):
                                  f"numbers (one per observed variable), got {observation_bounds!r}")
         self.observation_low = tuple(-b for b in bounds)
         self.observation_high = bounds
-        self._params = torch.tensor(astuple(plant), dtype=torch.float64)  # the C kernel's order
+        self.native = NativeStep(_CSRC / "double_pole.c", "double_pole", 7 + DAMPING_WINDOW, dtypes=("float64",),
+                                 params=(*astuple(plant), 2, int(self.damping), max_steps, DAMPING_WINDOW,
+                                         len(self._columns), *self._columns))
         self.validate()
 
     def with_fitness(self, fitness: str, max_steps: int) -> DoublePoleTask:
@@ -197,24 +197,8 @@ class DoublePoleTask(Task):
         return state
 
     def step(self, state: Tensor, action: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-        """One control step. On the CPU one C call (``tasks/csrc/double_pole.c``: the same
-        operations in the same order; sin and cos are libm's, so states agree with the torch path
-        to rounding, tested); elsewhere, or with ``SNN_NEAT_C_KERNELS=0``, the torch path."""
-        if state.device.type == "cpu" and state.dtype == torch.float64 and _kernel() is not None:
-            return self._step_kernel(state, action)
-        return self._step_torch(state, action)
-
-    def _step_kernel(self, state: Tensor, action: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-        state, force = state.contiguous(), action[:, 0].to(torch.float64).contiguous()
-        rows = state.shape[0]
-        out, reward = torch.empty_like(state), torch.empty(rows, dtype=torch.float64)
-        failed = torch.empty(rows, dtype=torch.bool)
-        _kernel().double_pole_step_f64(state.data_ptr(), force.data_ptr(), out.data_ptr(), reward.data_ptr(),
-                                       failed.data_ptr(), rows, DAMPING_WINDOW, self._params.data_ptr(), 2,
-                                       int(self.damping), self.max_steps, torch.get_num_threads())
-        return out, reward, failed
-
-    def _step_torch(self, state: Tensor, action: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """One control step (the definition; ``tasks/csrc/double_pole.c`` repeats it natively, bit
+        for bit, and the rollout uses that on the CPU)."""
         plant = double_pole_step(state[:, :6], action[:, 0].to(torch.float64), self.plant)
         failed = double_pole_failed(plant, self.plant)
         balanced = state[:, 6] + (~failed).to(torch.float64)
@@ -222,12 +206,12 @@ class DoublePoleTask(Task):
         if not self.damping:
             return new, (~failed).to(torch.float64), failed
         # the damping term of this step, in the slot of its step number (a ring over 100 steps)
-        jiggle = plant[:, :4].abs().sum(1)
+        jiggle = ordered_sum(plant[:, :4].abs())
         slot = (state[:, 6].long() % DAMPING_WINDOW + 7).unsqueeze(1)
         ring = new.scatter(1, slot, torch.where(failed, new.gather(1, slot).squeeze(1), jiggle).unsqueeze(1))
         # paid once: at the failure, or on reaching max_steps (a longer rollout pays nothing more)
         ends = torch.where(failed, state[:, 6] < self.max_steps, balanced == self.max_steps)
-        total = ring[:, 7:].sum(1)
+        total = ordered_sum(ring[:, 7:])  # slot order, as the native step
         late = balanced > DAMPING_WINDOW
         fitness = 0.1 * (balanced / 1000.0) + torch.where(late, 0.9 * (0.75 / torch.where(late, total, 1.0)), 0.0)
         return ring, torch.where(ends, fitness, 0.0), failed

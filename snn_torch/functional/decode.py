@@ -7,7 +7,7 @@ import math
 import torch
 from torch import Tensor
 
-from snn_torch.functional.scalars import scalar
+from snn_torch.functional.portable_math import sigmoid as portable_sigmoid
 
 __all__ = ["firing_rate", "weighted_rate_force", "bang_bang_force", "ordered_sum", "ordered_matvec",
            "ordered_sigmoid"]
@@ -53,9 +53,11 @@ def ordered_matvec(y: Tensor, w: Tensor) -> Tensor:
 
 
 def ordered_sigmoid(x: Tensor) -> Tensor:
-    """``1 / (1 + exp(-x))``: torch.sigmoid's vectorised and scalar-tail paths differ in the last
-    bit, so a row's result would depend on its position in the batch; this form does not."""
-    return torch.reciprocal(scalar(1.0, x) + torch.exp(-x))
+    """``1 / (1 + exp(-x))`` as ``snn_torch.functional.portable_math.sigmoid`` computes it: the
+    same bits at any batch position, on any path (the C kernels include its twin), with or
+    without a C compiler. (torch.sigmoid's vectorised and scalar-tail paths differ in the last
+    bit, and torch's exp differs from the C library's.)"""
+    return portable_sigmoid(x)
 
 
 def weighted_rate_force(

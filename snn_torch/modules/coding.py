@@ -151,7 +151,8 @@ class BangBang(nn.Module):
         self.threshold = _finite("threshold", threshold)
 
     def forward(self, drive: Tensor) -> Tensor:
-        return torch.where(drive > self.threshold, self.f_max, -self.f_max).to(drive.dtype)
+        f_max, neg = scalars((self.f_max, -self.f_max), drive)  # +-f_max rounded to the drive's dtype
+        return torch.where(drive > self.threshold, f_max, neg)
 
     def extra_repr(self) -> str:
         return f"f_max={self.f_max} (N), threshold={self.threshold}"

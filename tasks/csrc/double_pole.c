@@ -1,14 +1,27 @@
-/* Double-pole plant steps (see double_pole.h). Built with -ffp-contract=off: every product is
-   rounded before it is added, as torch does, and each expression keeps the torch function's order. */
-#include <math.h>
+/* The native step of tasks.double_pole.DoublePoleTask (snn_torch/csrc/native_plant.h): one control
+   step of double-pole plants (Runge-Kutta, failure test, steps balanced, Gruau's damping terms and
+   fitness). State [rows][7 + window]: x, x_dot, theta1, theta1_dot, theta2, theta2_dot, steps
+   balanced, the damping ring. params: gravity, cart mass, pole 1 mass, pole 1 half length, pole 2
+   mass, pole 2 half length, hinge friction, RK step (s), x limit (m), angle limit (rad), then RK
+   steps per control step, damping (0/1), max_steps, window, the number of observed variables and
+   their state columns. reward: 1 while balanced (damping 0), or, with damping, Gruau's fitness on
+   the step the episode ends in (failure or max_steps) and 0 otherwise. Built with
+   -ffp-contract=off, each expression in the torch function's order, sin and cos from
+   portable_math.h, sums in slot order: the torch step's bits. */
 #include <string.h>
-#include "double_pole.h"
+
+#include "native_plant.h"
+#include "portable_math.h"
+
+NATIVE_PLANT_DECLARE(double_pole)
 
 typedef struct { double g, mc, m1, l1, m2, l2, mu, tau, x_lim, th_lim; } plant_t;
 
 static void derivatives(const double s[6], double force, const plant_t *p, double d[6]) {
     const double g = -p->g;
-    const double cos1 = cos(s[2]), sin1 = sin(s[2]), cos2 = cos(s[4]), sin2 = sin(s[4]);
+    double cos1, sin1, cos2, sin2;
+    pm_sincos(s[2], &sin1, &cos1);
+    pm_sincos(s[4], &sin2, &cos2);
     const double ml1 = p->l1 * p->m1, ml2 = p->l2 * p->m2;
     const double temp1 = (p->mu * s[3]) / ml1, temp2 = (p->mu * s[5]) / ml2;
     const double g_sin1 = g * sin1, g_sin2 = g * sin2;
@@ -25,27 +38,28 @@ static void derivatives(const double s[6], double force, const plant_t *p, doubl
     d[5] = (-0.75 * ((x_acc * cos2 + g_sin2) + temp2)) / p->l2;
 }
 
-void double_pole_step_f64(const double *state, const double *force, double *out, double *reward, uint8_t *failed,
-                          int64_t rows, int64_t window, const double *params, int64_t rk_steps, int64_t damping,
-                          int64_t max_steps, int threads) {
+int double_pole_step_f64(const double *state, const double *action, double *out, double *reward,
+                         uint8_t *terminated, int64_t rows, const double *params) {
     const plant_t p = {params[0], params[1], params[2], params[3], params[4],
                        params[5], params[6], params[7], params[8], params[9]};
-    const int64_t width = 7 + window;
+    const int64_t rk_steps = (int64_t)params[10], damping = (int64_t)params[11];
+    const double max_steps = params[12];
+    const int64_t window = (int64_t)params[13], width = 7 + window;
     const double h = p.tau, half = 0.5 * p.tau, h6 = p.tau / 6.0;
-    #pragma omp parallel for num_threads(threads) schedule(static) if (rows > 256)
     for (int64_t r = 0; r < rows; ++r) {
         const double *in = state + r * width;
         double *o = out + r * width;
+        const double force = action[r];
         double s[6], k1[6], k2[6], k3[6], k4[6], t[6];
         memcpy(s, in, sizeof s);
         for (int64_t n = 0; n < rk_steps; ++n) {
-            derivatives(s, force[r], &p, k1);
+            derivatives(s, force, &p, k1);
             for (int i = 0; i < 6; ++i) t[i] = s[i] + half * k1[i];
-            derivatives(t, force[r], &p, k2);
+            derivatives(t, force, &p, k2);
             for (int i = 0; i < 6; ++i) t[i] = s[i] + half * k2[i];
-            derivatives(t, force[r], &p, k3);
+            derivatives(t, force, &p, k3);
             for (int i = 0; i < 6; ++i) t[i] = s[i] + h * k3[i];
-            derivatives(t, force[r], &p, k4);
+            derivatives(t, force, &p, k4);
             for (int i = 0; i < 6; ++i) s[i] = s[i] + h6 * ((k1[i] + k4[i]) + 2.0 * (k2[i] + k3[i]));
         }
         const int fail = fabs(s[0]) > p.x_lim || fabs(s[2]) > p.th_lim || fabs(s[4]) > p.th_lim;
@@ -53,20 +67,28 @@ void double_pole_step_f64(const double *state, const double *force, double *out,
         memcpy(o, s, sizeof s);
         o[6] = balanced;
         memcpy(o + 7, in + 7, (size_t)window * sizeof(double));
-        failed[r] = (uint8_t)fail;
+        terminated[r] = (uint8_t)fail;
         if (!damping) {
             reward[r] = fail ? 0.0 : 1.0;
             continue;
         }
         if (!fail) o[7 + (int64_t)in[6] % window] = ((fabs(s[0]) + fabs(s[1])) + fabs(s[2])) + fabs(s[3]);
-        const int ends = fail ? in[6] < (double)max_steps : balanced == (double)max_steps;
+        const int ends = fail ? in[6] < max_steps : balanced == max_steps;
         if (!ends) {
             reward[r] = 0.0;
             continue;
         }
-        double total = 0.0;
+        double total = 0.0; /* slot order from 0, as the torch step's ordered_sum */
         for (int64_t i = 0; i < window; ++i) total += o[7 + i];
-        const double late = balanced > (double)window ? 0.9 * (0.75 / total) : 0.0;
+        /* torch computes `0.75 / total` (a number over a tensor) as reciprocal(total) * 0.75 */
+        const double late = balanced > (double)window ? 0.9 * ((1.0 / total) * 0.75) : 0.0;
         reward[r] = 0.1 * (balanced / 1000.0) + late;
     }
+    return 0;
+}
+
+void double_pole_observe_f64(const double *state, double *observation, int64_t rows, const double *params) {
+    const int64_t width = 7 + (int64_t)params[13], n_obs = (int64_t)params[14];
+    for (int64_t r = 0; r < rows; ++r)
+        for (int64_t j = 0; j < n_obs; ++j) observation[r * n_obs + j] = state[r * width + (int64_t)params[15 + j]];
 }

@@ -194,15 +194,15 @@ def test_sigmoid_kernel_equals_the_torch_updates_bit_for_bit(dtype, N, clamped, 
 
 
 @pytest.mark.skipif(shutil.which("nm") is None, reason="no nm to list a library's symbols")
-@pytest.mark.parametrize("stem", ["recurrent_izhikevich", "recurrent_sigmoid", "double_pole"])
+@pytest.mark.parametrize("stem", ["recurrent_izhikevich", "recurrent_sigmoid", "episodes"])
 def test_kernel_libraries_export_exactly_what_their_headers_declare(stem):
+    from evolution import episodes
     from snn_torch._cbuild import parse_prototypes
     from snn_torch.functional import network_kernel, sigmoid_kernel
-    from tasks import double_pole
 
     loader, csrc = {"recurrent_izhikevich": (network_kernel._library, network_kernel._CSRC),
                     "recurrent_sigmoid": (sigmoid_kernel._library, sigmoid_kernel._CSRC),
-                    "double_pole": (double_pole._kernel, double_pole._CSRC)}[stem]
+                    "episodes": (episodes._library, episodes._CSRC)}[stem]
     lib = loader()
     if lib is None:
         pytest.skip("no C compiler: kernels unavailable")

@@ -124,13 +124,16 @@ def test_damping_fitness_is_gruaus(off_after, outcome, c_kernels, monkeypatch):
 
 
 @pytest.mark.parametrize("velocities", [True, False])
-def test_the_c_step_is_the_torch_step_to_rounding(velocities):
-    """The CPU kernel against the torch definition, step by step from all 625 generalisation
-    starts under the LQR law with noise (a few start states fail, most balance 600 steps)."""
-    from tasks.double_pole import _kernel, generalization_starts
+def test_the_native_step_is_the_torch_step_bit_for_bit(velocities):
+    """The native step (tasks/csrc/double_pole.c) against the torch definition, step by step from
+    all 625 generalisation starts under the LQR law with noise (a few start states fail, most
+    balance 600 steps): the same bits (sin and cos from portable_math, sums in slot order)."""
+    from evolution.native_plant import native_plant
+    from tasks.double_pole import generalization_starts
 
-    assert _kernel() is not None, "the C kernel must build here (CI has a C compiler)"
     task = DoublePoleTask(velocities=velocities, fitness="steps" if velocities else "damping", max_steps=600)
+    plant = native_plant(task, torch.float64)
+    assert plant is not None, "the native step must build here (CI has a C compiler)"
     gains = torch.tensor(_lqr_gains(), dtype=torch.float64)
     g = torch.Generator().manual_seed(1)
     state = task.starts(generalization_starts())
@@ -138,14 +141,15 @@ def test_the_c_step_is_the_torch_step_to_rounding(velocities):
     paid = torch.zeros(625, dtype=torch.float64)
     for _ in range(600):
         force = (-(state[:, :6] @ gains) + torch.randn(625, generator=g, dtype=torch.float64)).clamp(-10, 10)
-        ours, reward, failed = task._step_kernel(state, force.unsqueeze(1))
-        ref, ref_reward, ref_failed = task._step_torch(state, force.unsqueeze(1))
+        ours, reward, failed = plant.step(state, force.unsqueeze(1))
+        ref, ref_reward, ref_failed = task.step(state, force.unsqueeze(1))
         assert torch.equal(failed, ref_failed)
-        torch.testing.assert_close(ours, ref, rtol=1e-13, atol=1e-14)
-        torch.testing.assert_close(reward, ref_reward, rtol=1e-13, atol=0.0)
+        assert torch.equal(ours, ref)
+        assert torch.equal(reward, ref_reward)
+        assert torch.equal(plant.observe(state), task.observe(state))
         paid += torch.where(alive, reward, 0.0)
         alive &= ~failed
-        state = ref  # both paths continue from the definition's state
+        state = ref
     assert 0 < int(alive.sum()) < 625
     if not velocities:
         assert bool((paid[alive] > 0.06).all())  # the 600th step paid Gruau's fitness: 0.1 * 600 / 1000 + a damping term

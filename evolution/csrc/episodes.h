@@ -1,0 +1,59 @@
+/* Whole episodes in one native call (evolution.episodes): a controller's C kernel and a task's
+   native plant step (snn_torch/csrc/native_plant.h) in one loop, every control step,
+   termination, returns and the dropping of finished rows in C. Every function here is exported;
+   snn_torch._cbuild reads these prototypes to declare the ctypes signatures.
+
+   Common arguments. Plant: step_fn and observe_fn (the plant's functions for its state dtype,
+   plant_bytes 4 or 8 per element), plant_params, width (state columns), starts [episodes][width]
+   (row r starts from starts[r % episodes] and runs network r / episodes), n_obs observations,
+   n_act actions, max_steps control steps at most. Normalisation: x01 = clamp((T(obs) - low) /
+   span, 0, 1), as the rollout computes it. Outputs: returns[r] (sum of the rewards, double, in
+   step order) and steps[r] (control steps before the episode terminated, or max_steps). Rows
+   run on `threads` threads, each taking the next row when one of its rows finishes: no thread
+   waits for another until the end. Returns 0, or on the first bad row 1 (an observation NaN or
+   inf), 2 (a reward NaN or inf) or 3 (the plant step returned the nonzero code error[2]),
+   with error[1] the row; the outputs are then incomplete. */
+#include <stdint.h>
+
+/* Rate-coded spiking controllers (evolution.SpikingController; RateControlKernel's step, then
+   the decoder): networks w [G][n][n] (effective weights), initial state v0, u0, z0 [rows][n],
+   constant currents iconst [n], input gain (current: mV/ms at x = 1; Bernoulli: spike
+   probability per substep at x = 1), keys [G] (Bernoulli streams) or NULL (current encoder),
+   readout w_out [G][n][n_act], rest [n] or NULL, sigma [G], the rate window (control steps,
+   period_s each), the neuron and substeps; decoder 0: sigmoid force, 1: bang-bang at threshold,
+   2: linear, clamped to +-action_max. */
+int64_t episodes_spiking_f32(const void *step_fn, const void *observe_fn, const double *plant_params,
+                             int64_t plant_bytes, int64_t width, const void *starts, int64_t episodes,
+                             int64_t n_obs, int64_t n_act, int64_t max_steps, const float *low, const float *span,
+                             const float *w, const float *v0, const float *u0, const float *z0, int64_t n,
+                             const float *iconst, float gain, const int64_t *keys, const float *w_out,
+                             const float *rest, const float *sigma, int64_t window, double period_s,
+                             int64_t substeps, float dt, float a, float b, float c, float d, float vpeak,
+                             int64_t decoder, double action_max, double threshold, int64_t rows, double *returns,
+                             int64_t *steps, int64_t *error, int threads);
+int64_t episodes_spiking_f64(const void *step_fn, const void *observe_fn, const double *plant_params,
+                             int64_t plant_bytes, int64_t width, const void *starts, int64_t episodes,
+                             int64_t n_obs, int64_t n_act, int64_t max_steps, const double *low,
+                             const double *span, const double *w, const double *v0, const double *u0,
+                             const double *z0, int64_t n, const double *iconst, double gain, const int64_t *keys,
+                             const double *w_out, const double *rest, const double *sigma, int64_t window,
+                             double period_s, int64_t substeps, double dt, double a, double b, double c, double d,
+                             double vpeak, int64_t decoder, double action_max, double threshold, int64_t rows,
+                             double *returns, int64_t *steps, int64_t *error, int threads);
+
+/* Recurrent sigmoid controllers (evolution.SigmoidController): networks w [G][n][n], nodes
+   [0, n_in) clamped to the normalised observations and the next n_bias to 1, `updates`
+   synchronous updates of sigmoid(slope * sum_i y_i w_ij) per control step (values start at 0),
+   actions read from nodes first_output.. by decoder 0 (a_max (2 y - 1)) or 1 (+-a_max on y > 0.5). */
+int64_t episodes_sigmoid_f32(const void *step_fn, const void *observe_fn, const double *plant_params,
+                             int64_t plant_bytes, int64_t width, const void *starts, int64_t episodes,
+                             int64_t n_obs, int64_t n_act, int64_t max_steps, const float *low, const float *span,
+                             const float *w, int64_t n, int64_t n_bias, float slope, int64_t updates,
+                             int64_t first_output, int64_t decoder, double action_max, int64_t rows,
+                             double *returns, int64_t *steps, int64_t *error, int threads);
+int64_t episodes_sigmoid_f64(const void *step_fn, const void *observe_fn, const double *plant_params,
+                             int64_t plant_bytes, int64_t width, const void *starts, int64_t episodes,
+                             int64_t n_obs, int64_t n_act, int64_t max_steps, const double *low,
+                             const double *span, const double *w, int64_t n, int64_t n_bias, double slope,
+                             int64_t updates, int64_t first_output, int64_t decoder, double action_max,
+                             int64_t rows, double *returns, int64_t *steps, int64_t *error, int threads);

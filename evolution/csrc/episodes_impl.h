@@ -1,0 +1,393 @@
+/* The episode loops for one dtype T (suffix SFX), included twice by episodes.c. */
+
+#define FN(name) PASTE(name, SFX)
+#define IZH_LANES PASTE(PASTE(izh_, SFX), _lanes)
+
+/* What every loop shares: the plant, the normalisation and the outputs. */
+typedef struct {
+    native_step_fn step;
+    native_observe_fn observe;
+    const double *params;
+    const unsigned char *starts;
+    int64_t row_bytes, episodes, n_obs, n_act, max_steps, rows;
+    const T *low, *span;
+    double *returns;
+    int64_t *steps;
+} FN(plant_t_);
+
+/* A thread's rows in flight: their plant states, step counts and returns. */
+typedef struct {
+    unsigned char *state, *next;
+    double *obs, *act, reward[LANES];
+    uint8_t term[LANES];
+    int64_t row[LANES], t[LANES];
+    double ret[LANES];
+    T x[LANES * MAXN]; /* normalised observations */
+} FN(lanes_t_);
+
+static int FN(lanes_alloc_)(FN(lanes_t_) *L, const FN(plant_t_) *p) {
+    L->state = (unsigned char *)malloc((size_t)(LANES * p->row_bytes));
+    L->next = (unsigned char *)malloc((size_t)(LANES * p->row_bytes));
+    L->obs = (double *)malloc((size_t)(LANES * (p->n_obs > 0 ? p->n_obs : 1)) * sizeof(double));
+    L->act = (double *)malloc((size_t)(LANES * p->n_act) * sizeof(double));
+    return L->state && L->next && L->obs && L->act;
+}
+
+static void FN(lanes_free_)(FN(lanes_t_) *L) {
+    free(L->state); free(L->next); free(L->obs); free(L->act);
+}
+
+static void FN(lanes_load_)(FN(lanes_t_) *L, const FN(plant_t_) *p, int64_t k, int64_t r) {
+    memcpy(L->state + k * p->row_bytes, p->starts + (r % p->episodes) * p->row_bytes, (size_t)p->row_bytes);
+    L->row[k] = r;
+    L->t[k] = 0;
+    L->ret[k] = 0.0;
+}
+
+static void FN(lanes_move_)(FN(lanes_t_) *L, const FN(plant_t_) *p, int64_t from, int64_t to) {
+    memcpy(L->state + to * p->row_bytes, L->state + from * p->row_bytes, (size_t)p->row_bytes);
+    L->row[to] = L->row[from];
+    L->t[to] = L->t[from];
+    L->ret[to] = L->ret[from];
+}
+
+/* Observe and normalise rows [0, lanes); 0, or the lane whose observation is not finite plus 1. */
+static int64_t FN(lanes_observe_)(FN(lanes_t_) *L, const FN(plant_t_) *p, int64_t lanes) {
+    p->observe(L->state, L->obs, lanes, p->params);
+    for (int64_t k = 0; k < lanes; ++k)
+        for (int64_t j = 0; j < p->n_obs; ++j) {
+            const double o = L->obs[k * p->n_obs + j];
+            if (!isfinite(o)) return k + 1;
+            const T v = ((T)o - p->low[j]) / p->span[j];
+            L->x[k * MAXN + j] = v < (T)0 ? (T)0 : (v > (T)1 ? (T)1 : v);
+        }
+    return 0;
+}
+
+/* Step the plants of rows [0, lanes) under L->act; 0, or an error kind (error[1..2] set). */
+static int64_t FN(lanes_step_)(FN(lanes_t_) *L, const FN(plant_t_) *p, int64_t lanes, int64_t *error) {
+    const int code = p->step(L->state, L->act, L->next, L->reward, L->term, lanes, p->params);
+    if (code != 0) {
+        error[1] = L->row[0];
+        error[2] = code;
+        return 3;
+    }
+    for (int64_t k = 0; k < lanes; ++k) {
+        if (!isfinite(L->reward[k])) {
+            error[1] = L->row[k];
+            return 2;
+        }
+        L->ret[k] += L->reward[k];
+    }
+    unsigned char *swap = L->state;
+    L->state = L->next;
+    L->next = swap;
+    return 0;
+}
+
+/* Whether lane k's episode ended in the step just taken; if so its results are written. */
+static int FN(lanes_done_)(FN(lanes_t_) *L, const FN(plant_t_) *p, int64_t k) {
+    const int64_t t = L->t[k]++;
+    if (!L->term[k] && t + 1 < p->max_steps) return 0;
+    p->returns[L->row[k]] = L->ret[k];
+    p->steps[L->row[k]] = L->term[k] ? t : t + 1;
+    return 1;
+}
+
+static inline T FN(sigmoid_)(T x) { return (T)pm_sigmoid((double)x); }
+
+/* ---- spiking controllers ---- */
+
+typedef struct {
+    const T *w, *v0, *u0, *z0, *iconst, *w_out, *rest, *sigma;
+    const int64_t *keys;
+    int64_t n, np, window, substeps, decoder;
+    T gain, dt, a, b, c, d, vpeak;
+    double period_s, action_max, threshold;
+} FN(spiking_t_);
+
+typedef struct {
+    T vv[LANES * MAXN], uu[LANES * MAXN], zz[LANES * MAXN], I[LANES * MAXN], cnt[LANES * MAXN];
+    const T *W[LANES];
+    T *wbuf, *hist;
+    unsigned char *draws;
+} FN(spiking_lanes_t_);
+
+static void FN(spiking_load_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, const FN(plant_t_) *p, int64_t k,
+                              int64_t r) {
+    const int64_t n = c->n, np = c->np, g = r / p->episodes;
+    const T *wg = c->w + g * n * n;
+    if (np == n) {
+        S->W[k] = wg;
+    } else {
+        T *wk = S->wbuf + k * np * np; /* padding rows and columns stay 0: no synapses */
+        for (int64_t i = 0; i < n; ++i) memcpy(wk + i * np, wg + i * n, (size_t)n * sizeof(T));
+        S->W[k] = wk;
+    }
+    for (int64_t j = 0; j < np; ++j) {
+        S->vv[k * np + j] = j < n ? c->v0[r * n + j] : (T)0;
+        S->uu[k * np + j] = j < n ? c->u0[r * n + j] : (T)0;
+        S->zz[k * np + j] = j < n ? c->z0[r * n + j] : (T)0;
+    }
+    memset(S->hist + k * c->window * np, 0, (size_t)(c->window * np) * sizeof(T));
+}
+
+static void FN(spiking_move_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, int64_t from, int64_t to) {
+    const int64_t np = c->np;
+    memcpy(S->vv + to * np, S->vv + from * np, (size_t)np * sizeof(T));
+    memcpy(S->uu + to * np, S->uu + from * np, (size_t)np * sizeof(T));
+    memcpy(S->zz + to * np, S->zz + from * np, (size_t)np * sizeof(T));
+    if (np == c->n) {
+        S->W[to] = S->W[from];
+    } else {
+        memcpy(S->wbuf + to * np * np, S->wbuf + from * np * np, (size_t)(np * np) * sizeof(T));
+        S->W[to] = S->wbuf + to * np * np;
+    }
+    memcpy(S->hist + to * c->window * np, S->hist + from * c->window * np, (size_t)(c->window * np) * sizeof(T));
+}
+
+/* One control step of rows [0, lanes): RateControlKernel's encode, substeps, window and readout,
+   then the decoder (evolution.SpikingController._decode), actions into L->act. */
+static void FN(spiking_act_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, const FN(plant_t_) *p,
+                             FN(lanes_t_) *L, int64_t lanes) {
+    const int64_t n = c->n, np = c->np, n_x = p->n_obs, K = p->n_act, M = c->substeps * n_x;
+    const int bern = c->keys != NULL;
+    const int64_t n_src = bern ? n_x : 0;
+    const T gain = c->gain, dt = c->dt, a = c->a, b = c->b, cc = c->c, d = c->d, vpeak = c->vpeak;
+    for (int64_t k = 0; k < lanes; ++k) {
+        const T *x = L->x + k * MAXN;
+        for (int64_t j = 0; j < np; ++j) {
+            S->I[k * np + j] = j >= n ? (T)0 : (!bern && j < n_x) ? gain * x[j] + c->iconst[j] : c->iconst[j];
+            S->cnt[k * np + j] = 0;
+        }
+        if (bern) {
+            const int64_t g = L->row[k] / p->episodes;
+            const uint64_t key = (uint64_t)c->keys[g];
+            const int64_t base = L->t[k] * M;
+            double prob[MAXN];
+            for (int64_t i = 0; i < n_x; ++i) prob[i] = (double)(x[i] * gain);
+            unsigned char *dk = S->draws + k * M;
+            for (int64_t m = 0; m < M; ++m) dk[m] = uniform01(key, (uint64_t)(base + m)) < prob[m % n_x];
+        }
+    }
+    for (int64_t q = 0; q < c->substeps; ++q) {
+        for (int64_t k = 0; k < lanes && bern; ++k)
+            for (int64_t i = 0; i < n_x; ++i) {
+                const T s = S->draws[k * M + q * n_x + i] ? (T)1 : (T)0;
+                S->zz[k * np + i] = s;
+                S->cnt[k * np + i] += s;
+            }
+        LANE_WIDTHS(SIZED(IZH_LANES(S->vv, S->uu, S->zz, S->W, S->I, S->cnt, L_, N_, n_src, n, dt, a, b, cc, d, vpeak),
+                          IZH_LANES(S->vv, S->uu, S->zz, S->W, S->I, S->cnt, L_, np, n_src, n, dt, a, b, cc, d, vpeak)))
+    }
+    for (int64_t k = 0; k < lanes; ++k) {
+        const int64_t t = L->t[k], g = L->row[k] / p->episodes, W = c->window;
+        T *hk = S->hist + k * W * np;
+        T *slot = hk + (t % W) * np;
+        for (int64_t j = 0; j < n; ++j) slot[j] = S->cnt[k * np + j];
+        const T rate_div = (T)((double)(t + 1 < W ? t + 1 : W) * c->period_s);
+        T y[MAXN];
+        for (int64_t j = 0; j < n; ++j) {
+            T total = hk[j]; /* whole numbers: exact in any order */
+            for (int64_t s = 1; s < W; ++s) total += hk[s * np + j];
+            y[j] = total / rate_div;
+            if (c->rest) y[j] = y[j] - c->rest[j];
+        }
+        const T *wo = c->w_out + g * n * K;
+        const T sigma = c->sigma[g], amax = (T)c->action_max;
+        for (int64_t o = 0; o < K; ++o) {
+            double acc = (double)(y[0] * wo[o]);
+            for (int64_t j = 1; j < n; ++j) acc += (double)(y[j] * wo[j * K + o]);
+            const T drive = (T)acc;
+            T action;
+            if (c->decoder == 0) {
+                action = amax * ((T)2 * FN(sigmoid_)(sigma * drive) - (T)1);
+            } else if (c->decoder == 1) {
+                action = drive > (T)c->threshold ? amax : -amax;
+            } else {
+                const T v = amax * (sigma * drive) + (T)0;
+                action = v < -amax ? -amax : (v > amax ? amax : v);
+            }
+            L->act[k * K + o] = (double)action;
+        }
+    }
+}
+
+/* ---- sigmoid controllers ---- */
+
+typedef struct {
+    const T *w;
+    int64_t n, n_bias, updates, first_output, decoder;
+    T slope;
+    double action_max;
+} FN(sigmoid_t_);
+
+static void FN(sigmoid_act_)(T *values, const FN(sigmoid_t_) *c, const FN(plant_t_) *p, FN(lanes_t_) *L,
+                             int64_t lanes, T *yc, double *acc) {
+    const int64_t n = c->n, n_in = p->n_obs, fixed = n_in + c->n_bias, K = p->n_act;
+    for (int64_t k = 0; k < lanes; ++k) {
+        T *y = values + k * n;
+        const T *x = L->x + k * MAXN, *W = c->w + (L->row[k] / p->episodes) * n * n;
+        for (int64_t u = 0; u < c->updates; ++u) {
+            for (int64_t i = 0; i < n; ++i) yc[i] = i < n_in ? x[i] : i < fixed ? (T)1 : y[i];
+            for (int64_t j = 0; j < n; ++j) acc[j] = (double)(yc[0] * W[j]);
+            for (int64_t i = 1; i < n; ++i)
+                for (int64_t j = 0; j < n; ++j) acc[j] += (double)(yc[i] * W[i * n + j]);
+            for (int64_t j = 0; j < n; ++j)
+                y[j] = j < n_in ? x[j] : j < fixed ? (T)1 : FN(sigmoid_)(c->slope * (T)acc[j]);
+        }
+        const T amax = (T)c->action_max;
+        for (int64_t o = 0; o < K; ++o) {
+            const T out = y[c->first_output + o];
+            const T action = c->decoder == 1 ? (out > (T)0.5 ? amax : -amax) : amax * ((T)2 * out - (T)1);
+            L->act[k * K + o] = (double)action;
+        }
+    }
+}
+
+/* ---- the loops ---- */
+
+/* Retire finished lanes (results written), filling their places from the end; the new count. */
+#define RETIRE(MOVE_CTRL)                                                                          \
+    for (int64_t k = lanes - 1; k >= 0; --k) {                                                    \
+        if (!FN(lanes_done_)(&L, p, k)) continue;                                                 \
+        if (k != lanes - 1) {                                                                     \
+            FN(lanes_move_)(&L, p, lanes - 1, k);                                                 \
+            MOVE_CTRL;                                                                            \
+        }                                                                                         \
+        --lanes;                                                                                  \
+    }
+
+static int64_t FN(claim_)(int64_t *next_row, int64_t rows) {
+    int64_t r;
+    _Pragma("omp atomic capture")
+    r = (*next_row)++;
+    return r < rows ? r : -1;
+}
+
+static int64_t FN(failed_)(const int64_t *error) {
+    int64_t kind;
+    _Pragma("omp atomic read")
+    kind = error[0];
+    return kind;
+}
+
+static void FN(fail_)(int64_t *error, int64_t kind, int64_t row, int64_t code) {
+    _Pragma("omp critical(episodes_error)")
+    if (error[0] == 0) {
+        error[1] = row;
+        error[2] = code;
+        _Pragma("omp atomic write")
+        error[0] = kind;
+    }
+}
+
+int64_t FN(episodes_spiking_)(const void *step_fn, const void *observe_fn, const double *plant_params,
+                              int64_t plant_bytes, int64_t width, const void *starts, int64_t episodes,
+                              int64_t n_obs, int64_t n_act, int64_t max_steps, const T *low, const T *span,
+                              const T *w, const T *v0, const T *u0, const T *z0, int64_t n, const T *iconst, T gain,
+                              const int64_t *keys, const T *w_out, const T *rest, const T *sigma, int64_t window,
+                              double period_s, int64_t substeps, T dt, T a, T b, T c, T d, T vpeak,
+                              int64_t decoder, double action_max, double threshold, int64_t rows, double *returns,
+                              int64_t *steps, int64_t *error, int threads) {
+    const FN(plant_t_) plant = {(native_step_fn)step_fn, (native_observe_fn)observe_fn, plant_params,
+                                (const unsigned char *)starts, width * plant_bytes, episodes, n_obs, n_act,
+                                max_steps, rows, low, span, returns, steps};
+    const FN(spiking_t_) ctrl = {w, v0, u0, z0, iconst, w_out, rest, sigma, keys, n, padded_size(n), window, substeps,
+                                 decoder, gain, dt, a, b, c, d, vpeak, period_s, action_max, threshold};
+    const FN(plant_t_) *p = &plant;
+    int64_t next_row = 0;
+    error[0] = error[1] = error[2] = 0;
+    _Pragma("omp parallel num_threads(threads)")
+    {
+        FN(lanes_t_) L;
+        FN(spiking_lanes_t_) *S = (FN(spiking_lanes_t_) *)calloc(1, sizeof(FN(spiking_lanes_t_)));
+        const int64_t np = ctrl.np;
+        int ok = FN(lanes_alloc_)(&L, p) && S != NULL;
+        if (ok) {
+            S->wbuf = (T *)calloc((size_t)(LANES * np * np), sizeof(T));
+            S->hist = (T *)calloc((size_t)(LANES * window * np), sizeof(T));
+            S->draws = (unsigned char *)malloc((size_t)(LANES * (substeps * n_obs > 0 ? substeps * n_obs : 1)));
+            ok = S->wbuf && S->hist && S->draws;
+        }
+        if (!ok) FN(fail_)(error, 4, -1, 0);
+        for (int64_t k = 0; ok && k < LANES; ++k) S->W[k] = S->wbuf + k * np * np;
+        int64_t lanes = 0;
+        while (ok && !FN(failed_)(error)) {
+            for (int64_t r; lanes < LANES && (r = FN(claim_)(&next_row, rows)) >= 0; ++lanes) {
+                FN(lanes_load_)(&L, p, lanes, r);
+                FN(spiking_load_)(S, &ctrl, p, lanes, r);
+            }
+            if (lanes == 0) break;
+            const int64_t bad = FN(lanes_observe_)(&L, p, lanes);
+            if (bad) {
+                FN(fail_)(error, 1, L.row[bad - 1], 0);
+                break;
+            }
+            FN(spiking_act_)(S, &ctrl, p, &L, lanes);
+            int64_t err[3] = {0, 0, 0};
+            const int64_t kind = FN(lanes_step_)(&L, p, lanes, err);
+            if (kind) {
+                FN(fail_)(error, kind, err[1], err[2]);
+                break;
+            }
+            RETIRE(FN(spiking_move_)(S, &ctrl, lanes - 1, k))
+        }
+        if (S) { free(S->wbuf); free(S->hist); free(S->draws); }
+        free(S);
+        FN(lanes_free_)(&L);
+    }
+    return error[0];
+}
+
+int64_t FN(episodes_sigmoid_)(const void *step_fn, const void *observe_fn, const double *plant_params,
+                              int64_t plant_bytes, int64_t width, const void *starts, int64_t episodes,
+                              int64_t n_obs, int64_t n_act, int64_t max_steps, const T *low, const T *span,
+                              const T *w, int64_t n, int64_t n_bias, T slope, int64_t updates, int64_t first_output,
+                              int64_t decoder, double action_max, int64_t rows, double *returns, int64_t *steps,
+                              int64_t *error, int threads) {
+    const FN(plant_t_) plant = {(native_step_fn)step_fn, (native_observe_fn)observe_fn, plant_params,
+                                (const unsigned char *)starts, width * plant_bytes, episodes, n_obs, n_act,
+                                max_steps, rows, low, span, returns, steps};
+    const FN(sigmoid_t_) ctrl = {w, n, n_bias, updates, first_output, decoder, slope, action_max};
+    const FN(plant_t_) *p = &plant;
+    int64_t next_row = 0;
+    error[0] = error[1] = error[2] = 0;
+    _Pragma("omp parallel num_threads(threads)")
+    {
+        FN(lanes_t_) L;
+        T *values = (T *)malloc((size_t)(LANES * n) * sizeof(T));
+        T *yc = (T *)malloc((size_t)n * sizeof(T));
+        double *acc = (double *)malloc((size_t)n * sizeof(double));
+        int ok = FN(lanes_alloc_)(&L, p) && values && yc && acc;
+        if (!ok) FN(fail_)(error, 4, -1, 0);
+        int64_t lanes = 0;
+        while (ok && !FN(failed_)(error)) {
+            for (int64_t r; lanes < LANES && (r = FN(claim_)(&next_row, rows)) >= 0; ++lanes) {
+                FN(lanes_load_)(&L, p, lanes, r);
+                memset(values + lanes * n, 0, (size_t)n * sizeof(T));
+            }
+            if (lanes == 0) break;
+            const int64_t bad = FN(lanes_observe_)(&L, p, lanes);
+            if (bad) {
+                FN(fail_)(error, 1, L.row[bad - 1], 0);
+                break;
+            }
+            FN(sigmoid_act_)(values, &ctrl, p, &L, lanes, yc, acc);
+            int64_t err[3] = {0, 0, 0};
+            const int64_t kind = FN(lanes_step_)(&L, p, lanes, err);
+            if (kind) {
+                FN(fail_)(error, kind, err[1], err[2]);
+                break;
+            }
+            RETIRE(memcpy(values + k * n, values + (lanes - 1) * n, (size_t)n * sizeof(T)))
+        }
+        free(values); free(yc); free(acc);
+        FN(lanes_free_)(&L);
+    }
+    return error[0];
+}
+
+#undef RETIRE
+#undef FN
+#undef IZH_LANES

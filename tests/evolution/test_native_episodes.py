@@ -1,0 +1,243 @@
+"""Whole episodes in one native call (evolution.episodes): the torch rollout's bits, or a clear error."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+import torch
+
+from evolution import NEAT, Task, TaskError, episode_starts, make_controller, rollout
+from evolution.episodes import native_episodes_available, native_rollout
+from evolution.native_plant import native_plant
+from evolution.phenotype import SigmoidSpec, SpikingSpec
+from evolution.population import Genomes
+from evolution.task import NativeStep
+from tasks.cartpole import CartPoleTask
+from tasks.double_pole import DoublePoleTask, generalization_starts
+from tasks.experiments.cartpole import PAPER_SPECS, controller_config, markov_config
+
+_TEST_CSRC = Path(__file__).resolve().parent.parent / "csrc"
+
+pytestmark = pytest.mark.skipif(not native_episodes_available(), reason="no C compiler: nothing native to compare")
+
+
+def _genomes(cfg, seeds=(0, 1), generations=8, seed=0):
+    """Populations with some structure: a few generations of NEAT under random fitness."""
+    neat = NEAT(cfg, seeds=list(seeds))
+    g = torch.Generator().manual_seed(seed)
+    for _ in range(generations):
+        neat.tell(torch.rand(len(seeds), cfg.pop_size, generator=g, dtype=torch.float64))
+    return neat.ask()
+
+
+def _as(genomes, dtype):
+    """The population with its floating-point genes (weights, sigma) in ``dtype``."""
+    return Genomes(**{k: v.to(dtype) if v.is_floating_point() else v for k, v in genomes.tensors().items()})
+
+
+def _both(task, genomes, cfg, spec, kind, **kwargs):
+    """``(native, python loop)`` rollouts of one population (fresh controllers: no shared state)."""
+    controller = make_controller(genomes, cfg, task, spec, kind=kind)
+    episodes = kwargs.get("episodes", 1)
+    starts = kwargs.get("starts")
+    if starts is None:
+        starts = episode_starts(task, episodes, kwargs.get("seed", 0), dtype=controller.weight.dtype)
+    assert native_rollout(task, controller, starts, episodes=episodes, max_steps=task.max_steps) is not None
+    native = rollout(task, make_controller(genomes, cfg, task, spec, kind=kind), **kwargs)
+    python = rollout(task, make_controller(genomes, cfg, task, spec, kind=kind), native=False, **kwargs)
+    return native, python
+
+
+def _assert_same(a, b):
+    assert torch.equal(a.steps, b.steps)
+    assert torch.equal(a.returns, b.returns)  # float64 sums in step order: bit for bit
+    assert torch.equal(a.terminated, b.terminated)
+
+
+SPIKING_SPECS = {
+    "paper table2": PAPER_SPECS[("table2", "snn")],
+    "paper table1 (bernoulli, bang-bang, rest-relative)": PAPER_SPECS[("table1", "snn")],
+    "linear decoder, window 2": SpikingSpec(decoder="linear", rate_window_steps=2),
+    "bang-bang above a threshold": SpikingSpec(decoder="bang_bang", threshold=25.0),
+}
+
+
+@pytest.mark.parametrize("name", list(SPIKING_SPECS))
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_spiking_episodes_are_the_python_loops_bits(name, dtype):
+    spec = SPIKING_SPECS[name]
+    markov = spec.encoder == "bernoulli"
+    cfg = markov_config("snn") if markov else controller_config("snn")
+    task = CartPoleTask.markov(max_steps=400) if markov else CartPoleTask.nonmarkov(max_steps=400)
+    genomes = _as(_genomes(cfg), dtype)
+    native, python = _both(task, genomes, cfg, spec, "snn", episodes=3)
+    _assert_same(native, python)
+    assert int(native.steps.max()) > int(native.steps.min())  # rows end at different steps
+
+
+@pytest.mark.parametrize("spec", [SigmoidSpec(), SigmoidSpec(decoder="bang_bang"), SigmoidSpec(updates_per_step=3)])
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_sigmoid_episodes_are_the_python_loops_bits(spec, dtype):
+    cfg = markov_config("sigmoid")
+    task = CartPoleTask.markov(max_steps=400)
+    genomes = _as(_genomes(cfg), dtype)
+    native, python = _both(task, genomes, cfg, spec, "sigmoid", episodes=2)
+    _assert_same(native, python)
+
+
+@pytest.mark.parametrize("velocities", [True, False])
+@pytest.mark.parametrize("kind", ["snn", "sigmoid"])
+def test_double_pole_episodes_are_the_python_loops_bits(velocities, kind):
+    """From 25 of the 625 generalisation starts, with Gruau's damping fitness for DPNV."""
+    task = DoublePoleTask(velocities=velocities, fitness="steps" if velocities else "damping", max_steps=300)
+    cfg = replace(controller_config(kind), num_inputs=task.observation_size)
+    starts = task.starts(generalization_starts()[::25])
+    spec = SpikingSpec() if kind == "snn" else SigmoidSpec()
+    native, python = _both(task, _genomes(cfg), cfg, spec, kind, episodes=starts.shape[0], starts=starts)
+    _assert_same(native, python)
+
+
+def test_thread_count_and_c_kernels_do_not_change_the_answer(monkeypatch):
+    cfg = controller_config("snn")
+    task = CartPoleTask.nonmarkov(max_steps=300)
+    genomes = _genomes(cfg, seeds=(3, 4, 5))
+    threads = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        one = rollout(task, make_controller(genomes, cfg, task, SpikingSpec()), episodes=2)
+        torch.set_num_threads(2)
+        two = rollout(task, make_controller(genomes, cfg, task, SpikingSpec()), episodes=2)
+    finally:
+        torch.set_num_threads(threads)
+    _assert_same(one, two)
+    monkeypatch.setenv("SNN_NEAT_C_KERNELS", "0")  # no C at all: the torch modules and the torch plant
+    fresh = CartPoleTask.nonmarkov(max_steps=300)
+    torch_only = rollout(fresh, make_controller(genomes, cfg, fresh, SpikingSpec()), episodes=2)
+    assert native_plant(fresh, torch.float32) is None
+    _assert_same(one, torch_only)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_cartpole_native_step_is_the_torch_step(dtype):
+    """Step by step from spread-out states under random forces, including failing ones."""
+    task = CartPoleTask.markov()
+    plant = native_plant(task, dtype)
+    assert plant is not None
+    g = torch.Generator().manual_seed(5)
+    state = ((torch.rand(4000, 4, generator=g, dtype=torch.float64) - 0.5) * torch.tensor([5.0, 4.0, 0.5, 4.0],
+                                                                                           dtype=torch.float64)).to(dtype)
+    for _ in range(50):
+        action = ((torch.rand(4000, 1, generator=g, dtype=torch.float64) * 2 - 1) * 10).to(dtype)
+        ref = task.step(state, action)
+        ours = plant.step(state, action)
+        for a, b in zip(ours, ref, strict=True):
+            assert torch.equal(a, b)
+        assert torch.equal(plant.observe(state), task.observe(state))
+        state = ref[0]
+
+
+class PointMass(Task):
+    """A unit mass on a line (state x, v, t), with a native twin in tests/csrc/point_mass.c."""
+
+    observation_low, observation_high = (-2.0, -2.0), (2.0, 2.0)
+    action_size, action_max = 1, 1.0
+    max_steps, control_period_s = 60, 0.02
+
+    def __init__(self, mode: int = 0) -> None:
+        self.mode, self.name = mode, f"point-mass-{mode}"
+        self.native = NativeStep(_TEST_CSRC / "point_mass.c", "point_mass", 3,
+                                 params=(self.control_period_s * 5, mode))
+
+    def reset(self, batch, generator, *, device="cpu", dtype=torch.float32):
+        x0 = torch.rand(batch, generator=generator, dtype=torch.float64) * 2.0 - 1.0
+        return torch.stack([x0, torch.zeros_like(x0), torch.zeros_like(x0)], -1).to(device=device, dtype=dtype)
+
+    def step(self, state, action):
+        x, v, t = state.unbind(-1)
+        dt = self.control_period_s * 5
+        v = v + dt * (action[:, 0] - 0.5 * v)
+        x = x + dt * v
+        t = t + 1
+        reward = -(x * x)
+        if self.mode == 3:
+            reward = torch.where((t == 30) & (x > 0), math.nan, reward)
+        return torch.stack([x, v, t], -1), reward, x.abs() > 2.0
+
+    def observe(self, state):
+        return state[:, :2]
+
+
+def _point_mass_genomes():
+    cfg = controller_config("sigmoid")
+    return cfg, _genomes(cfg)
+
+
+def test_a_users_native_plant_runs_whole_episodes():
+    task = PointMass(0)
+    cfg, genomes = _point_mass_genomes()
+    for dtype in (torch.float32, torch.float64):
+        assert native_plant(task, dtype) is not None  # built and checked against the torch step
+    native, python = _both(task, genomes, cfg, SigmoidSpec(), "sigmoid", episodes=4, seed=3)
+    _assert_same(native, python)
+    starts = task.reset(4, torch.Generator().manual_seed(3))
+    ctrl = make_controller(genomes, cfg, task, SigmoidSpec(), kind="sigmoid")
+    assert native_rollout(task, ctrl, starts, episodes=4, max_steps=60) is not None  # it did run natively
+
+
+@pytest.mark.parametrize("mode, message", [(1, "native step's state differs from the torch step's"),
+                                           (2, "native step returned error code 7")])
+def test_a_native_step_that_disagrees_or_fails_is_caught_when_bound(mode, message):
+    task = PointMass(mode)
+    cfg, genomes = _point_mass_genomes()
+    with pytest.raises(TaskError, match=message) as info:
+        rollout(task, make_controller(genomes, cfg, task, SigmoidSpec(), kind="sigmoid"), episodes=2)
+    assert task.name in str(info.value)
+
+
+def test_nan_reward_in_a_native_episode_names_the_task_and_row():
+    task = PointMass(3)
+    cfg, genomes = _point_mass_genomes()
+    messages = []
+    for native in (True, False):
+        with pytest.raises(TaskError, match=r"step\(\) returned reward holding NaN or inf") as info:
+            rollout(task, make_controller(genomes, cfg, task, SigmoidSpec(), kind="sigmoid"), episodes=3, seed=1,
+                    native=native)
+        messages.append(str(info.value))
+    assert all("'point-mass-3'" in m and "(genome " in m for m in messages)
+
+
+def test_native_step_fields_are_checked():
+    with pytest.raises(ValueError, match="prefix"):
+        NativeStep(_TEST_CSRC / "point_mass.c", "point-mass", 3)
+    with pytest.raises(ValueError, match="state_width"):
+        NativeStep(_TEST_CSRC / "point_mass.c", "point_mass", 0)
+    with pytest.raises(ValueError, match="dtypes"):
+        NativeStep(_TEST_CSRC / "point_mass.c", "point_mass", 3, dtypes=("float16",))
+    with pytest.raises(ValueError, match="params"):
+        NativeStep(_TEST_CSRC / "point_mass.c", "point_mass", 3, params=(math.nan,))
+
+
+def _doc_blocks(language: str) -> list[str]:
+    text = (Path(__file__).resolve().parents[2] / "docs" / "writing-a-task.md").read_text()
+    blocks = text.split("```" + language + "\n")[1:]
+    return [b.split("```")[0] for b in blocks]
+
+
+def test_the_docs_native_pendulum_is_its_torch_step(tmp_path):
+    """docs/writing-a-task.md's native step example, as a user would save it: built, checked
+    against its torch step, and its episodes the Python loop's."""
+    c_source = next(b for b in _doc_blocks("c") if "PENDULUM(f32, float)" in b)
+    (tmp_path / "pendulum.c").write_text(c_source)
+    task_code, check_code = [b for b in _doc_blocks("python") if "NativePendulum" in b]
+    namespace = {"__file__": str(tmp_path / "plant.py")}
+    exec(task_code, namespace)
+    exec(check_code, namespace)  # the page's own check: the native step equals the torch step
+    task = namespace["NativePendulum"]()
+    cfg = replace(controller_config("snn"), num_inputs=2)
+    genomes = _genomes(cfg)
+    native, python = _both(task, genomes, cfg, SpikingSpec(), "snn", episodes=3, seed=2)
+    _assert_same(native, python)
+    assert float(native.returns.abs().sum()) > 0
