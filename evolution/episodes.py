@@ -24,7 +24,7 @@ import torch
 from torch import Tensor
 
 from evolution.native_plant import native_plant
-from evolution.phenotype import SigmoidController, SpikingController, kernel_constants
+from evolution.phenotype import DECODER_CODES, SigmoidController, SpikingController, kernel_constants
 from evolution.task import Task, TaskError
 from snn_torch._cbuild import library_loader
 from snn_torch.functional.sigmoid_kernel import SIGMOID_MAX_NODES
@@ -33,7 +33,6 @@ __all__ = ["native_rollout", "native_episodes_available"]
 
 _CSRC = Path(__file__).resolve().parent / "csrc"
 _library = library_loader("episodes", _CSRC / "episodes.c", _CSRC / "episodes.h")
-_SPIKING_DECODERS = {"sigmoid_force": 0, "bang_bang": 1, "linear": 2}
 _SIGMOID_DECODERS = {"sigmoid_force": 0, "bang_bang": 1}
 
 
@@ -97,7 +96,7 @@ def native_rollout(task: Task, controller, starts, *, episodes: int, max_steps: 
             k.iconst.data_ptr(), k.gain, None if keys is None else keys.data_ptr(), k.w_out.data_ptr(),
             None if k.rest is None else k.rest.data_ptr(), sigma.data_ptr(), controller.window.window,
             controller.window.period_s, controller.substeps, spec.dt_ms, p.a, p.b, p.c, p.d, p.v_peak,
-            _SPIKING_DECODERS[spec.decoder], float(task.action_max), float(spec.threshold), *outputs)
+            DECODER_CODES[spec.decoder], float(task.action_max), float(spec.threshold), *outputs)
     else:
         net, spec = controller.network, controller.spec
         w_eff = net.effective_weight(dtype).contiguous()

@@ -2,6 +2,7 @@
 
 #define FN(name) PASTE(name, SFX)
 #define IZH_LANES PASTE(PASTE(izh_, SFX), _lanes)
+#define IZH_DECODE PASTE(SFX, _decode)
 
 /* What every loop shares: the plant, the normalisation and the outputs. */
 typedef struct {
@@ -194,21 +195,11 @@ static void FN(spiking_act_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, c
             if (c->rest) y[j] = y[j] - c->rest[j];
         }
         const T *wo = c->w_out + g * n * K;
-        const T sigma = c->sigma[g], amax = (T)c->action_max;
         for (int64_t o = 0; o < K; ++o) {
             double acc = (double)(y[0] * wo[o]);
             for (int64_t j = 1; j < n; ++j) acc += (double)(y[j] * wo[j * K + o]);
-            const T drive = (T)acc;
-            T action;
-            if (c->decoder == 0) {
-                action = amax * ((T)2 * FN(sigmoid_)(sigma * drive) - (T)1);
-            } else if (c->decoder == 1) {
-                action = drive > (T)c->threshold ? amax : -amax;
-            } else {
-                const T v = amax * (sigma * drive) + (T)0;
-                action = v < -amax ? -amax : (v > amax ? amax : v);
-            }
-            L->act[k * K + o] = (double)action;
+            L->act[k * K + o] = (double)IZH_DECODE((T)acc, c->sigma[g], c->decoder, (T)c->action_max,
+                                                   (T)c->threshold);
         }
     }
 }
@@ -391,3 +382,4 @@ int64_t FN(episodes_sigmoid_)(const void *step_fn, const void *observe_fn, const
 #undef RETIRE
 #undef FN
 #undef IZH_LANES
+#undef IZH_DECODE

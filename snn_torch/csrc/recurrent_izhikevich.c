@@ -15,6 +15,7 @@
 #include "recurrent_izhikevich.h"
 
 #include "counter_rng.h"
+#include "portable_math.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -244,3 +245,24 @@ void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *
 }
 DEFINE_CONTROL(izh_rate_control_step_f32, izh_network_steps_f32, float)
 DEFINE_CONTROL(izh_rate_control_step_f64, izh_network_steps_f64, double)
+
+/* The decoders of evolution.SpikingController (snn_torch.modules.coding's SigmoidForce, BangBang
+   and LinearReadout as the controller calls them), one action from one drive: the modules'
+   operations in their order, the sigmoid portable_math.h's. decoder 0: a_max (2 sigmoid(sigma d)
+   - 1); 1: +-a_max on d > threshold; 2: a_max (sigma d) + 0, clamped to +-a_max. */
+#define DEFINE_DECODE(NAME, T)                                                                 \
+static inline T NAME##_decode(T drive, T sigma, int64_t decoder, T amax, T threshold) {        \
+    if (decoder == 0) return amax * ((T)2 * (T)pm_sigmoid((double)(sigma * drive)) - (T)1);   \
+    if (decoder == 1) return drive > threshold ? amax : -amax;                                 \
+    const T v = amax * (sigma * drive) + (T)0;                                                 \
+    return v < -amax ? -amax : (v > amax ? amax : v);                                          \
+}                                                                                              \
+void rate_decode_##NAME(const T *drive, const T *sigma, T *action, int64_t rows, int64_t n_out, \
+                        int64_t decoder, double action_max, double threshold) {                \
+    for (int64_t r = 0; r < rows; ++r)                                                         \
+        for (int64_t k = 0; k < n_out; ++k)                                                    \
+            action[r * n_out + k] = NAME##_decode(drive[r * n_out + k], sigma[r], decoder,      \
+                                                  (T)action_max, (T)threshold);                \
+}
+DEFINE_DECODE(f32, float)
+DEFINE_DECODE(f64, double)

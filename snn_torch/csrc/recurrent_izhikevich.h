@@ -47,3 +47,11 @@ void izh_rate_control_step_f64(double *v, double *u, double *z, double *counts, 
                                int64_t window, int64_t slot, double rate_div, const double *w_out, int64_t n_out,
                                const double *rest, double *drive, int64_t rows, int64_t n, int64_t substeps,
                                double dt, double a, double b, double c, double d, double vpeak, int threads);
+
+/* The spiking controllers' decoders (evolution.SpikingController._decode) in C: action[r][k] from
+   drive[r][k] and the row's gain sigma[r]; decoder 0: sigmoid force, 1: bang-bang at threshold,
+   2: linear, clamped to +-action_max (see recurrent_izhikevich.c). */
+void rate_decode_f32(const float *drive, const float *sigma, float *action, int64_t rows, int64_t n_out,
+                     int64_t decoder, double action_max, double threshold);
+void rate_decode_f64(const double *drive, const double *sigma, double *action, int64_t rows, int64_t n_out,
+                     int64_t decoder, double action_max, double threshold);

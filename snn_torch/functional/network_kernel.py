@@ -207,3 +207,15 @@ class RateControlKernel:
                  history.shape[0], slot, rate_div, w_out, self.num_outputs, rest, drive.data_ptr(), B,
                  self.num_neurons, substeps, dt, a, b, c, d, vpeak, torch.get_num_threads())
         return drive, counts
+
+    def decode(self, drive: Tensor, sigma: Tensor, decoder: int, action_max: float, threshold: float) -> Tensor:
+        """Actions ``[B, K]`` from ``drive [B, K]`` and each row's gain ``sigma [B]`` (the drive's
+        dtype, contiguous): ``decoder`` 0 (``SigmoidForce``), 1 (``BangBang`` at ``threshold``) or 2
+        (``LinearReadout`` clamped to ``+-action_max``), the modules' bits (the sigmoid is
+        ``portable_math``'s)."""
+        B, K = drive.shape
+        action = torch.empty_like(drive)
+        fn = _library().rate_decode_f32 if drive.dtype == torch.float32 else _library().rate_decode_f64
+        fn(drive.data_ptr(), sigma.data_ptr(), action.data_ptr(), B, K, int(decoder), float(action_max),
+           float(threshold))
+        return action

@@ -1,11 +1,11 @@
-"""The C kernel of ``PopulationRecurrentSigmoid`` on the CPU: the clamp and the slot-ordered
-weighted sum of one update of many recurrent sigmoid networks, in one call.
+"""The C kernel of ``PopulationRecurrentSigmoid`` on the CPU: whole updates (clamp, slot-ordered
+weighted sum, sigmoid) of many recurrent sigmoid networks, in one call.
 
-``PopulationRecurrentSigmoid.control_step`` costs a dozen small tensor ops per update (clamp,
-matvec as a float64 cumsum, slope); for the small networks NEAT evolves per-op overhead sets its
-speed. The kernel (``snn_torch/csrc/recurrent_sigmoid.c``) does those in C, rows mapped to
-networks by an index; the sigmoid itself stays in torch, so its ``exp`` is torch's and the two
-paths agree bit for bit (tested).
+``PopulationRecurrentSigmoid.control_step`` costs a few dozen small tensor ops per update (clamp,
+matvec as a float64 cumsum, slope, the portable sigmoid); for the small networks NEAT evolves
+per-op overhead sets its speed. The kernel (``snn_torch/csrc/recurrent_sigmoid.c``) does the
+updates in C, rows mapped to networks by an index; its sigmoid is ``portable_math``'s, the torch
+path's own, so the two agree bit for bit (tested).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from torch import Tensor
 
 from snn_torch._cbuild import library_loader
 
-__all__ = ["sigmoid_kernel_supports", "sigmoid_drive_kernel", "SIGMOID_MAX_NODES"]
+__all__ = ["sigmoid_kernel_supports", "sigmoid_update_kernel", "SIGMOID_MAX_NODES"]
 
 SIGMOID_MAX_NODES = 1024  # per-row buffers live on the stack
 _CSRC = Path(__file__).resolve().parent.parent / "csrc"
@@ -30,19 +30,20 @@ def sigmoid_kernel_supports(values: Tensor) -> bool:
             and 1 <= values.shape[1] <= SIGMOID_MAX_NODES and _library() is not None)
 
 
-def sigmoid_drive_kernel(values: Tensor, inputs: Tensor, w_eff: Tensor, network: Tensor | None, *, num_bias: int,
-                         slope: float) -> Tensor:
-    """``slope * ordered_matvec(clamp(values), w)``: ``[B, N]`` pre-activations, where the clamp
-    sets nodes ``0 .. S-1`` to ``inputs [B, S]`` and the next ``num_bias`` to 1.
+def sigmoid_update_kernel(values: Tensor, inputs: Tensor, w_eff: Tensor, network: Tensor | None, *, num_bias: int,
+                          slope: float, updates: int) -> Tensor:
+    """``updates`` updates ``clamp(sigmoid(slope * ordered_matvec(clamp(values), w)))``: the node
+    values ``[B, N]``, where the clamp sets nodes ``0 .. S-1`` to ``inputs [B, S]`` and the next
+    ``num_bias`` to 1.
 
     Trusted: the caller checked shapes, dtypes (``inputs`` and ``w_eff [G, N, N]`` in ``values``'
     dtype) and the network indices (an index outside ``w_eff`` would read outside its memory).
     """
     B, N = values.shape
     values, inputs, w_eff = values.contiguous(), inputs.contiguous(), w_eff.contiguous()
-    z = torch.empty_like(values)
+    out = torch.empty_like(values)
     lib = _library()
-    fn = lib.sigmoid_drive_f32 if values.dtype == torch.float32 else lib.sigmoid_drive_f64
+    fn = lib.sigmoid_update_f32 if values.dtype == torch.float32 else lib.sigmoid_update_f64
     fn(values.data_ptr(), inputs.data_ptr(), w_eff.data_ptr(), None if network is None else network.data_ptr(),
-       z.data_ptr(), B, N, inputs.shape[1], num_bias, slope, torch.get_num_threads())
-    return z
+       out.data_ptr(), B, N, inputs.shape[1], num_bias, slope, updates, torch.get_num_threads())
+    return out

@@ -45,8 +45,8 @@ from snn_torch.functional.recurrent import (
 from snn_torch.functional.scalars import scalar
 from snn_torch.functional.sigmoid_kernel import (
     SIGMOID_MAX_NODES,
-    sigmoid_drive_kernel,
     sigmoid_kernel_supports,
+    sigmoid_update_kernel,
 )
 from snn_torch.functional.threshold import SpikeFn, heaviside
 
@@ -308,8 +308,8 @@ class PopulationRecurrentSigmoid(_PopulationNetwork):
 
     ``control_step(inputs [B, num_clamped], values [B, N], updates=1, network=None)`` returns
     the node values after ``updates`` updates (values start at 0: ``initial_state``). ``backend``:
-    ``"auto"`` runs the clamp and the ordered sum in C on the CPU where it can
-    (``snn_torch.functional.sigmoid_kernel``; the sigmoid stays in torch), ``"kernel"`` insists,
+    ``"auto"`` runs the updates in C on the CPU where it can
+    (``snn_torch.functional.sigmoid_kernel``), ``"kernel"`` insists,
     ``"torch"`` never: the same bits either way.
     """
 
@@ -349,14 +349,10 @@ class PopulationRecurrentSigmoid(_PopulationNetwork):
             raise ValueError(f"backend='kernel' needs CPU float32/64 values, N <= {SIGMOID_MAX_NODES}, no gradient "
                              "and a C compiler")
         if use_kernel:
-            # the clamp and the ordered sum in C, the sigmoid in torch: the same bits, fewer ops
+            # every update in C, the sigmoid portable_math's: the same bits, one call
             w_eff, inputs = self.effective_weight(values.dtype), inputs.to(values.dtype)
-            k, b = self.num_clamped, self.num_bias
-            for _ in range(updates):
-                y = ordered_sigmoid(sigmoid_drive_kernel(y, inputs, w_eff, network, num_bias=b, slope=self.slope))
-                y[:, :k] = inputs
-                y[:, k : k + b] = 1.0
-            return y
+            return sigmoid_update_kernel(y, inputs, w_eff, network, num_bias=self.num_bias, slope=self.slope,
+                                         updates=updates)
         w = self._row_weights(values.dtype, network, values.shape[0])
         for _ in range(updates):
             y = self._clamp(y, inputs)
