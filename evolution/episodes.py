@@ -13,11 +13,13 @@ until the last row is done, so a busy core delays only its own rows).
 The result is the torch rollout's, bit for bit (the controllers' kernels and the plant's native
 step repeat the torch operations in order; ``tests/evolution/test_native_episodes.py``), so
 whether a rollout ran natively changes its speed, never its answer. A bad observation or
-reward (NaN, inf) raises the torch rollout's ``TaskError``.
+reward (NaN, inf) raises the torch rollout's ``TaskError``. ``SNN_NEAT_NATIVE_EPISODES=0``
+switches this path off (the C kernels stay on; ``SNN_NEAT_C_KERNELS=0`` switches off all C).
 """
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import torch
@@ -36,9 +38,13 @@ _library = library_loader("episodes", _CSRC / "episodes.c", _CSRC / "episodes.h"
 _SIGMOID_DECODERS = {"sigmoid_force": 0, "bang_bang": 1}
 
 
+ENV_SWITCH = "SNN_NEAT_NATIVE_EPISODES"  # "0": the Python loop over control steps (C kernels stay on)
+
+
 def native_episodes_available() -> bool:
-    """True when the episode loop compiled (once per machine) and C kernels are on."""
-    return _library() is not None
+    """True when the episode loop compiled (once per machine), C kernels are on and
+    ``SNN_NEAT_NATIVE_EPISODES`` is not ``0``."""
+    return os.environ.get(ENV_SWITCH) != "0" and _library() is not None
 
 
 def _controller_supported(controller, rows: int) -> bool:
@@ -63,7 +69,7 @@ def native_rollout(task: Task, controller, starts, *, episodes: int, max_steps: 
     from start ``e``) run to the end natively, or None where this path does not apply (no native
     step for the start states' dtype, a controller without a C kernel, no compiler, C kernels
     off). ``starts``: ``[episodes, width]`` start states, already checked by the caller."""
-    lib = _library()
+    lib = _library() if os.environ.get(ENV_SWITCH) != "0" else None
     if lib is None or not isinstance(starts, Tensor) or max_steps < 1:
         return None
     plant = native_plant(task, starts.dtype)

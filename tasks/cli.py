@@ -9,6 +9,12 @@ import sys
 import time
 from pathlib import Path
 
+# OpenMP threads (torch's and the C kernels') sleep at a barrier instead of spinning: on a busy
+# machine a spinning thread burns the core its partner is waiting for (Table II with two competing
+# busy processes: 67 s wall, 57 CPU-s spinning; 56 s, 40 CPU-s passive). Set before torch loads
+# its OpenMP runtime (nothing above imports torch); a value the user set is kept.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 # tasks.experiments.cartpole.GA_CHOICES, spelled out so that --help needs no torch (a test
 # keeps the two equal).
 GA_CHOICES = ("tuned", "neat-c++", "neat-python")

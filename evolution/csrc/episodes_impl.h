@@ -112,6 +112,7 @@ typedef struct {
     const T *W[LANES];
     T *wbuf, *hist;
     unsigned char *draws;
+    double *prob;
 } FN(spiking_lanes_t_);
 
 static void FN(spiking_load_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, const FN(plant_t_) *p, int64_t k,
@@ -165,10 +166,11 @@ static void FN(spiking_act_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, c
             const int64_t g = L->row[k] / p->episodes;
             const uint64_t key = (uint64_t)c->keys[g];
             const int64_t base = L->t[k] * M;
-            double prob[MAXN];
-            for (int64_t i = 0; i < n_x; ++i) prob[i] = (double)(x[i] * gain);
+            double *pm = S->prob; /* each counter's probability, then one flat loop (vectorised) */
+            for (int64_t i = 0; i < n_x; ++i) pm[i] = (double)(x[i] * gain);
+            for (int64_t m = n_x; m < M; ++m) pm[m] = pm[m - n_x];
             unsigned char *dk = S->draws + k * M;
-            for (int64_t m = 0; m < M; ++m) dk[m] = uniform01(key, (uint64_t)(base + m)) < prob[m % n_x];
+            for (int64_t m = 0; m < M; ++m) dk[m] = uniform01(key, (uint64_t)(base + m)) < pm[m];
         }
     }
     for (int64_t q = 0; q < c->substeps; ++q) {
@@ -299,7 +301,8 @@ int64_t FN(episodes_spiking_)(const void *step_fn, const void *observe_fn, const
             S->wbuf = (T *)calloc((size_t)(LANES * np * np), sizeof(T));
             S->hist = (T *)calloc((size_t)(LANES * window * np), sizeof(T));
             S->draws = (unsigned char *)malloc((size_t)(LANES * (substeps * n_obs > 0 ? substeps * n_obs : 1)));
-            ok = S->wbuf && S->hist && S->draws;
+            S->prob = (double *)malloc((size_t)(substeps * n_obs > 0 ? substeps * n_obs : 1) * sizeof(double));
+            ok = S->wbuf && S->hist && S->draws && S->prob;
         }
         if (!ok) FN(fail_)(error, 4, -1, 0);
         for (int64_t k = 0; ok && k < LANES; ++k) S->W[k] = S->wbuf + k * np * np;
@@ -324,7 +327,7 @@ int64_t FN(episodes_spiking_)(const void *step_fn, const void *observe_fn, const
             }
             RETIRE(FN(spiking_move_)(S, &ctrl, lanes - 1, k))
         }
-        if (S) { free(S->wbuf); free(S->hist); free(S->draws); }
+        if (S) { free(S->wbuf); free(S->hist); free(S->draws); free(S->prob); }
         free(S);
         FN(lanes_free_)(&L);
     }

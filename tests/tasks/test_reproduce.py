@@ -182,11 +182,13 @@ def test_tune_ga_tries_every_preset_and_threshold_and_picks_the_lowest_mean(caps
 
 
 def test_results_do_not_depend_on_a_c_compiler(tmp_path):
-    """The same short reproduction with every C kernel, and with none (no compiler, an empty
+    """The same short reproduction with every C kernel (whole episodes natively), with the C
+    kernels but the Python loop over control steps, and with no C at all (no compiler, an empty
     cache): byte-identical runs.csv."""
     outputs = []
-    for name, env in (("kernels", {}), ("no compiler", {"CC": str(tmp_path / "no-such-cc"), "PATH": "/nonexistent",
-                                                       "SNN_NEAT_CACHE": str(tmp_path / "empty-cache")})):
+    for name, env in (("kernels", {}), ("python loop", {"SNN_NEAT_NATIVE_EPISODES": "0"}),
+                      ("no compiler", {"CC": str(tmp_path / "no-such-cc"), "PATH": "/nonexistent",
+                                       "SNN_NEAT_CACHE": str(tmp_path / "empty-cache")})):
         out = tmp_path / name.replace(" ", "_")
         proc = subprocess.run([sys.executable, "-m", "tasks.cli", "reproduce", "table2", "--runs", "2",
                                "--generations", "3", "--seed", "100", "--out", str(out), "--quiet", "--threads", "1"],
@@ -195,4 +197,4 @@ def test_results_do_not_depend_on_a_c_compiler(tmp_path):
         outputs.append((out / "runs.csv").read_bytes())
         if name == "no compiler":
             assert "torch path" in proc.stderr  # the fallback says so
-    assert outputs[0] == outputs[1]
+    assert outputs[0] == outputs[1] == outputs[2]
