@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import os
 import shlex
 import sys
@@ -415,6 +416,8 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
     args.argv = argv
+    if not faulthandler.is_enabled():  # a crash in C (a task's native step) names the Python frame
+        faulthandler.enable()
     if getattr(args, "command", None) == "reproduce" and args.out is None:
         args.out = f"results/{args.table}"
     prog = f"snn-neat {args.command}"

@@ -1,7 +1,8 @@
 /* Test plants for the native-step seam (tests/evolution/test_native_episodes.py): a unit mass on
    a line, state (x, v, t), the torch PointMass's operations in order. params: dt, mode, where mode
    0 is faithful, 1 drifts from the torch step by a rounding, 2 returns error code 7 once t reaches
-   5, 3 pays a NaN reward at t = 30 for rows that start right of 0 (as the torch step does). */
+   5, 3 pays a NaN reward at t = 30 for rows that start right of 0 (as the torch step does), 4
+   crashes (writes through a null pointer) once t reaches 3. */
 #include <math.h>
 
 #include "native_plant.h"
@@ -18,6 +19,7 @@ int point_mass_step_##SUFFIX(const T *state, const double *action, T *next, doub
         T *o = next + 3 * r;                                                                    \
         const T a = (T)action[r];                                                               \
         if (mode == 2 && s[2] >= (T)5) return 7;                                                \
+        if (mode == 4 && s[2] >= (T)3) *(volatile int *)(uintptr_t)params[2] = 1;              \
         const T v = s[1] + dt * (a - (T)0.5 * s[1]);                                            \
         const T x = s[0] + dt * v;                                                              \
         o[0] = mode == 1 ? x + (T)1e-3 * dt : x;                                                \

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import math
+import signal
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -149,7 +152,7 @@ class PointMass(Task):
     def __init__(self, mode: int = 0) -> None:
         self.mode, self.name = mode, f"point-mass-{mode}"
         self.native = NativeStep(_TEST_CSRC / "point_mass.c", "point_mass", 3,
-                                 params=(self.control_period_s * 5, mode))
+                                 params=(self.control_period_s * 5, mode, 0))
 
     def reset(self, batch, generator, *, device="cpu", dtype=torch.float32):
         x0 = torch.rand(batch, generator=generator, dtype=torch.float64) * 2.0 - 1.0
@@ -195,6 +198,27 @@ def test_a_native_step_that_disagrees_or_fails_is_caught_when_bound(mode, messag
     with pytest.raises(TaskError, match=message) as info:
         rollout(task, make_controller(genomes, cfg, task, SigmoidSpec(), kind="sigmoid"), episodes=2)
     assert task.name in str(info.value)
+
+
+def test_a_native_step_that_crashes_is_reported_where_it_is_bound(tmp_path):
+    """A segfault in a plant's C code ends the process, as in any C extension; it happens in the
+    check when the plant is bound, before any evaluation, and Python's fault handler (on in
+    ``snn-neat``, and here) names that frame."""
+    script = tmp_path / "crash.py"
+    script.write_text(
+        "import faulthandler, sys\n"
+        "faulthandler.enable()\n"
+        f"sys.path.insert(0, {str(Path(__file__).resolve().parents[2])!r})\n"
+        "from tests.evolution.test_native_episodes import PointMass, _point_mass_genomes\n"
+        "from evolution import make_controller, rollout\n"
+        "from evolution.phenotype import SigmoidSpec\n"
+        "task = PointMass(4)\n"
+        "cfg, genomes = _point_mass_genomes()\n"
+        "rollout(task, make_controller(genomes, cfg, task, SigmoidSpec(), kind='sigmoid'), episodes=2)\n"
+        "print('survived')\n")
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == -signal.SIGSEGV and "survived" not in proc.stdout
+    assert "Segmentation fault" in proc.stderr and "native_plant.py" in proc.stderr  # in the check, named
 
 
 def test_nan_reward_in_a_native_episode_names_the_task_and_row():
