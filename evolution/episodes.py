@@ -4,7 +4,8 @@
 iteration: fast for a wide batch, but once most rows have failed, the few survivors of a long
 episode pay Python's and torch's per-op overhead on every step (hundreds of microseconds for
 one row). Where the task has a native step (``Task.native``) and the controller a C kernel (a
-``SpikingController`` or ``SigmoidController`` on the CPU), ``native_rollout`` runs every row's
+``SpikingController`` or ``SigmoidController`` on the CPU, or either as ``StaticMapController``'s memoryless map),
+``native_rollout`` runs every row's
 whole episode in C instead (``evolution/csrc/episodes.c``): observe, normalise, act, step,
 accumulate, stop, take the next row; spread over ``torch.get_num_threads()`` threads, each of
 which takes the next row as soon as one of its rows finishes (no thread waits for another
@@ -25,6 +26,7 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
+from evolution.ablation import StaticMapController
 from evolution.native_plant import native_plant
 from evolution.phenotype import DECODER_CODES, SigmoidController, SpikingController, kernel_constants
 from evolution.task import Task, TaskError
@@ -72,6 +74,9 @@ def native_rollout(task: Task, controller, starts, *, episodes: int, max_steps: 
     lib = _library() if os.environ.get(ENV_SWITCH) != "0" else None
     if lib is None or not isinstance(starts, Tensor) or max_steps < 1:
         return None
+    settle = 0
+    if isinstance(controller, StaticMapController):  # the memory ablation's memoryless map
+        controller, settle = controller.controller, controller.settle_steps
     plant = native_plant(task, starts.dtype)
     G = controller.num_genomes
     B = G * episodes
@@ -102,13 +107,13 @@ def native_rollout(task: Task, controller, starts, *, episodes: int, max_steps: 
             k.iconst.data_ptr(), k.gain, None if keys is None else keys.data_ptr(), k.w_out.data_ptr(),
             None if k.rest is None else k.rest.data_ptr(), sigma.data_ptr(), controller.window.window,
             controller.window.period_s, controller.substeps, spec.dt_ms, p.a, p.b, p.c, p.d, p.v_peak,
-            DECODER_CODES[spec.decoder], float(task.action_max), float(spec.threshold), *outputs)
+            DECODER_CODES[spec.decoder], float(task.action_max), float(spec.threshold), settle, *outputs)
     else:
         net, spec = controller.network, controller.spec
         w_eff = net.effective_weight(dtype).contiguous()
         kind = getattr(lib, f"episodes_sigmoid_{suffix}")(
             *common, w_eff.data_ptr(), net.num_neurons, net.num_bias, net.slope, spec.updates_per_step,
-            controller.outputs[0], _SIGMOID_DECODERS[spec.decoder], float(controller.action_max), *outputs)
+            controller.outputs[0], _SIGMOID_DECODERS[spec.decoder], float(controller.action_max), settle, *outputs)
     if kind:
         _raise(task, int(kind), int(error[1]), int(error[2]), episodes)
     return returns, steps

@@ -21,7 +21,9 @@
    probability per substep at x = 1), keys [G] (Bernoulli streams) or NULL (current encoder),
    readout w_out [G][n][n_act], rest [n] or NULL, sigma [G], the rate window (control steps,
    period_s each), the neuron and substeps; decoder 0: sigmoid force, 1: bang-bang at threshold,
-   2: linear, clamped to +-action_max. */
+   2: linear, clamped to +-action_max. settle > 0 (both controllers): each control step is
+   evolution.ablation.StaticMapController's memoryless map, `settle` control steps from rest on
+   the observation, the last one's action. */
 int64_t episodes_spiking_f32(const void *step_fn, const void *observe_fn, const double *plant_params,
                              int64_t plant_bytes, int64_t width, const void *starts, int64_t episodes,
                              int64_t n_obs, int64_t n_act, int64_t max_steps, const float *low, const float *span,
@@ -29,8 +31,8 @@ int64_t episodes_spiking_f32(const void *step_fn, const void *observe_fn, const 
                              const float *iconst, float gain, const int64_t *keys, const float *w_out,
                              const float *rest, const float *sigma, int64_t window, double period_s,
                              int64_t substeps, float dt, float a, float b, float c, float d, float vpeak,
-                             int64_t decoder, double action_max, double threshold, int64_t rows, double *returns,
-                             int64_t *steps, int64_t *error, int threads);
+                             int64_t decoder, double action_max, double threshold, int64_t settle, int64_t rows,
+                             double *returns, int64_t *steps, int64_t *error, int threads);
 int64_t episodes_spiking_f64(const void *step_fn, const void *observe_fn, const double *plant_params,
                              int64_t plant_bytes, int64_t width, const void *starts, int64_t episodes,
                              int64_t n_obs, int64_t n_act, int64_t max_steps, const double *low,
@@ -38,8 +40,8 @@ int64_t episodes_spiking_f64(const void *step_fn, const void *observe_fn, const 
                              const double *z0, int64_t n, const double *iconst, double gain, const int64_t *keys,
                              const double *w_out, const double *rest, const double *sigma, int64_t window,
                              double period_s, int64_t substeps, double dt, double a, double b, double c, double d,
-                             double vpeak, int64_t decoder, double action_max, double threshold, int64_t rows,
-                             double *returns, int64_t *steps, int64_t *error, int threads);
+                             double vpeak, int64_t decoder, double action_max, double threshold, int64_t settle,
+                             int64_t rows, double *returns, int64_t *steps, int64_t *error, int threads);
 
 /* Recurrent sigmoid controllers (evolution.SigmoidController): networks w [G][n][n], nodes
    [0, n_in) clamped to the normalised observations and the next n_bias to 1, `updates`
@@ -49,11 +51,12 @@ int64_t episodes_sigmoid_f32(const void *step_fn, const void *observe_fn, const 
                              int64_t plant_bytes, int64_t width, const void *starts, int64_t episodes,
                              int64_t n_obs, int64_t n_act, int64_t max_steps, const float *low, const float *span,
                              const float *w, int64_t n, int64_t n_bias, float slope, int64_t updates,
-                             int64_t first_output, int64_t decoder, double action_max, int64_t rows,
-                             double *returns, int64_t *steps, int64_t *error, int threads);
+                             int64_t first_output, int64_t decoder, double action_max, int64_t settle,
+                             int64_t rows, double *returns, int64_t *steps, int64_t *error, int threads);
 int64_t episodes_sigmoid_f64(const void *step_fn, const void *observe_fn, const double *plant_params,
                              int64_t plant_bytes, int64_t width, const void *starts, int64_t episodes,
                              int64_t n_obs, int64_t n_act, int64_t max_steps, const double *low,
                              const double *span, const double *w, int64_t n, int64_t n_bias, double slope,
                              int64_t updates, int64_t first_output, int64_t decoder, double action_max,
-                             int64_t rows, double *returns, int64_t *steps, int64_t *error, int threads);
+                             int64_t settle, int64_t rows, double *returns, int64_t *steps, int64_t *error,
+                             int threads);

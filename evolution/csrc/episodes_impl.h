@@ -102,7 +102,7 @@ static inline T FN(sigmoid_)(T x) { return (T)pm_sigmoid((double)x); }
 typedef struct {
     const T *w, *v0, *u0, *z0, *iconst, *w_out, *rest, *sigma;
     const int64_t *keys;
-    int64_t n, np, window, substeps, decoder;
+    int64_t n, np, window, substeps, decoder, settle;
     T gain, dt, a, b, c, d, vpeak;
     double period_s, action_max, threshold;
 } FN(spiking_t_);
@@ -115,6 +115,8 @@ typedef struct {
     double *prob;
 } FN(spiking_lanes_t_);
 
+static void FN(spiking_reset_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, int64_t k, int64_t r);
+
 static void FN(spiking_load_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, const FN(plant_t_) *p, int64_t k,
                               int64_t r) {
     const int64_t n = c->n, np = c->np, g = r / p->episodes;
@@ -126,12 +128,7 @@ static void FN(spiking_load_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, 
         for (int64_t i = 0; i < n; ++i) memcpy(wk + i * np, wg + i * n, (size_t)n * sizeof(T));
         S->W[k] = wk;
     }
-    for (int64_t j = 0; j < np; ++j) {
-        S->vv[k * np + j] = j < n ? c->v0[r * n + j] : (T)0;
-        S->uu[k * np + j] = j < n ? c->u0[r * n + j] : (T)0;
-        S->zz[k * np + j] = j < n ? c->z0[r * n + j] : (T)0;
-    }
-    memset(S->hist + k * c->window * np, 0, (size_t)(c->window * np) * sizeof(T));
+    FN(spiking_reset_)(S, c, k, r);
 }
 
 static void FN(spiking_move_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, int64_t from, int64_t to) {
@@ -148,10 +145,11 @@ static void FN(spiking_move_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, 
     memcpy(S->hist + to * c->window * np, S->hist + from * c->window * np, (size_t)(c->window * np) * sizeof(T));
 }
 
-/* One control step of rows [0, lanes): RateControlKernel's encode, substeps, window and readout,
-   then the decoder (evolution.SpikingController._decode), actions into L->act. */
-static void FN(spiking_act_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, const FN(plant_t_) *p,
-                             FN(lanes_t_) *L, int64_t lanes) {
+/* One control step of rows [0, lanes), the lane's control step count t[k]: RateControlKernel's
+   encode, substeps, window and readout, then the decoder (evolution.SpikingController._decode),
+   actions into L->act. */
+static void FN(spiking_step_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, const FN(plant_t_) *p,
+                              FN(lanes_t_) *L, int64_t lanes, const int64_t *tt) {
     const int64_t n = c->n, np = c->np, n_x = p->n_obs, K = p->n_act, M = c->substeps * n_x;
     const int bern = c->keys != NULL;
     const int64_t n_src = bern ? n_x : 0;
@@ -165,7 +163,7 @@ static void FN(spiking_act_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, c
         if (bern) {
             const int64_t g = L->row[k] / p->episodes;
             const uint64_t key = (uint64_t)c->keys[g];
-            const int64_t base = L->t[k] * M;
+            const int64_t base = tt[k] * M;
             double *pm = S->prob; /* each counter's probability, then one flat loop (vectorised) */
             for (int64_t i = 0; i < n_x; ++i) pm[i] = (double)(x[i] * gain);
             for (int64_t m = n_x; m < M; ++m) pm[m] = pm[m - n_x];
@@ -184,7 +182,7 @@ static void FN(spiking_act_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, c
                           IZH_LANES(S->vv, S->uu, S->zz, S->W, S->I, S->cnt, L_, np, n_src, n, dt, a, b, cc, d, vpeak)))
     }
     for (int64_t k = 0; k < lanes; ++k) {
-        const int64_t t = L->t[k], g = L->row[k] / p->episodes, W = c->window;
+        const int64_t t = tt[k], g = L->row[k] / p->episodes, W = c->window;
         T *hk = S->hist + k * W * np;
         T *slot = hk + (t % W) * np;
         for (int64_t j = 0; j < n; ++j) slot[j] = S->cnt[k * np + j];
@@ -206,11 +204,39 @@ static void FN(spiking_act_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, c
     }
 }
 
+/* Lane k's network and rate window at rest (its row's initial state). */
+static void FN(spiking_reset_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, int64_t k, int64_t r) {
+    const int64_t n = c->n, np = c->np;
+    for (int64_t j = 0; j < np; ++j) {
+        S->vv[k * np + j] = j < n ? c->v0[r * n + j] : (T)0;
+        S->uu[k * np + j] = j < n ? c->u0[r * n + j] : (T)0;
+        S->zz[k * np + j] = j < n ? c->z0[r * n + j] : (T)0;
+    }
+    memset(S->hist + k * c->window * np, 0, (size_t)(c->window * np) * sizeof(T));
+}
+
+/* A control step: the network's own (state carried), or with settle > 0 the memoryless map of
+   evolution.ablation.StaticMapController: from rest, `settle` control steps on this observation
+   (counted 0, 1, ... as a fresh state counts them), the last one's action. */
+static void FN(spiking_act_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, const FN(plant_t_) *p,
+                             FN(lanes_t_) *L, int64_t lanes) {
+    if (c->settle == 0) {
+        FN(spiking_step_)(S, c, p, L, lanes, L->t);
+        return;
+    }
+    int64_t tt[LANES];
+    for (int64_t k = 0; k < lanes; ++k) FN(spiking_reset_)(S, c, k, L->row[k]);
+    for (int64_t s = 0; s < c->settle; ++s) {
+        for (int64_t k = 0; k < lanes; ++k) tt[k] = s;
+        FN(spiking_step_)(S, c, p, L, lanes, tt);
+    }
+}
+
 /* ---- sigmoid controllers ---- */
 
 typedef struct {
     const T *w;
-    int64_t n, n_bias, updates, first_output, decoder;
+    int64_t n, n_bias, updates, first_output, decoder, settle;
     T slope;
     double action_max;
 } FN(sigmoid_t_);
@@ -218,10 +244,14 @@ typedef struct {
 static void FN(sigmoid_act_)(T *values, const FN(sigmoid_t_) *c, const FN(plant_t_) *p, FN(lanes_t_) *L,
                              int64_t lanes, T *yc, double *acc) {
     const int64_t n = c->n, n_in = p->n_obs, fixed = n_in + c->n_bias, K = p->n_act;
+    /* settle > 0: evolution.ablation.StaticMapController's memoryless map: from values 0,
+       `settle` control steps on this observation, in a scratch row */
+    const int64_t updates = c->settle ? c->settle * c->updates : c->updates;
     for (int64_t k = 0; k < lanes; ++k) {
-        T *y = values + k * n;
+        T *y = c->settle ? values + LANES * n : values + k * n;
+        if (c->settle) memset(y, 0, (size_t)n * sizeof(T));
         const T *x = L->x + k * MAXN, *W = c->w + (L->row[k] / p->episodes) * n * n;
-        for (int64_t u = 0; u < c->updates; ++u) {
+        for (int64_t u = 0; u < updates; ++u) {
             for (int64_t i = 0; i < n; ++i) yc[i] = i < n_in ? x[i] : i < fixed ? (T)1 : y[i];
             for (int64_t j = 0; j < n; ++j) acc[j] = (double)(yc[0] * W[j]);
             for (int64_t i = 1; i < n; ++i)
@@ -281,13 +311,13 @@ int64_t FN(episodes_spiking_)(const void *step_fn, const void *observe_fn, const
                               const T *w, const T *v0, const T *u0, const T *z0, int64_t n, const T *iconst, T gain,
                               const int64_t *keys, const T *w_out, const T *rest, const T *sigma, int64_t window,
                               double period_s, int64_t substeps, T dt, T a, T b, T c, T d, T vpeak,
-                              int64_t decoder, double action_max, double threshold, int64_t rows, double *returns,
-                              int64_t *steps, int64_t *error, int threads) {
+                              int64_t decoder, double action_max, double threshold, int64_t settle, int64_t rows,
+                              double *returns, int64_t *steps, int64_t *error, int threads) {
     const FN(plant_t_) plant = {(native_step_fn)step_fn, (native_observe_fn)observe_fn, plant_params,
                                 (const unsigned char *)starts, width * plant_bytes, episodes, n_obs, n_act,
                                 max_steps, rows, low, span, returns, steps};
     const FN(spiking_t_) ctrl = {w, v0, u0, z0, iconst, w_out, rest, sigma, keys, n, padded_size(n), window, substeps,
-                                 decoder, gain, dt, a, b, c, d, vpeak, period_s, action_max, threshold};
+                                 decoder, settle, gain, dt, a, b, c, d, vpeak, period_s, action_max, threshold};
     const FN(plant_t_) *p = &plant;
     int64_t next_row = 0;
     error[0] = error[1] = error[2] = 0;
@@ -338,19 +368,19 @@ int64_t FN(episodes_sigmoid_)(const void *step_fn, const void *observe_fn, const
                               int64_t plant_bytes, int64_t width, const void *starts, int64_t episodes,
                               int64_t n_obs, int64_t n_act, int64_t max_steps, const T *low, const T *span,
                               const T *w, int64_t n, int64_t n_bias, T slope, int64_t updates, int64_t first_output,
-                              int64_t decoder, double action_max, int64_t rows, double *returns, int64_t *steps,
-                              int64_t *error, int threads) {
+                              int64_t decoder, double action_max, int64_t settle, int64_t rows, double *returns,
+                              int64_t *steps, int64_t *error, int threads) {
     const FN(plant_t_) plant = {(native_step_fn)step_fn, (native_observe_fn)observe_fn, plant_params,
                                 (const unsigned char *)starts, width * plant_bytes, episodes, n_obs, n_act,
                                 max_steps, rows, low, span, returns, steps};
-    const FN(sigmoid_t_) ctrl = {w, n, n_bias, updates, first_output, decoder, slope, action_max};
+    const FN(sigmoid_t_) ctrl = {w, n, n_bias, updates, first_output, decoder, settle, slope, action_max};
     const FN(plant_t_) *p = &plant;
     int64_t next_row = 0;
     error[0] = error[1] = error[2] = 0;
     _Pragma("omp parallel num_threads(threads)")
     {
         FN(lanes_t_) L;
-        T *values = (T *)malloc((size_t)(LANES * n) * sizeof(T));
+        T *values = (T *)malloc((size_t)((LANES + 1) * n) * sizeof(T)); /* and a scratch row */
         T *yc = (T *)malloc((size_t)n * sizeof(T));
         double *acc = (double *)malloc((size_t)n * sizeof(double));
         int ok = FN(lanes_alloc_)(&L, p) && values && yc && acc;

@@ -265,3 +265,23 @@ def test_the_docs_native_pendulum_is_its_torch_step(tmp_path):
     native, python = _both(task, genomes, cfg, SpikingSpec(), "snn", episodes=3, seed=2)
     _assert_same(native, python)
     assert float(native.returns.abs().sum()) > 0
+
+
+@pytest.mark.parametrize("kind, spec", [("snn", PAPER_SPECS[("table2", "snn")]), ("snn", PAPER_SPECS[("table1", "snn")]),
+                                        ("sigmoid", SigmoidSpec(updates_per_step=2))])
+def test_the_static_map_ablation_runs_natively_with_the_same_bits(kind, spec):
+    """evolution.ablation.StaticMapController (from rest, settle steps on each observation) in the
+    episode loop: the Python loop's returns and steps."""
+    from evolution.ablation import StaticMapController
+
+    markov = kind == "sigmoid" or spec.encoder == "bernoulli"
+    cfg = markov_config(kind) if markov else controller_config(kind)
+    task = CartPoleTask.markov(max_steps=150) if markov else CartPoleTask.nonmarkov(max_steps=150)
+    genomes = _genomes(cfg)
+    maps = [StaticMapController(make_controller(genomes, cfg, task, spec, kind=kind), 3) for _ in range(2)]
+    starts = episode_starts(task, 2, 0)
+    assert native_rollout(task, maps[0], starts, episodes=2, max_steps=150) is not None
+    native = rollout(task, maps[0], episodes=2)
+    python = rollout(task, maps[1], episodes=2, native=False)
+    _assert_same(native, python)
+    assert int(native.steps.max()) > int(native.steps.min())
