@@ -2,8 +2,9 @@
 
 ``native_plant(task, dtype)`` builds the task's C source once per machine (``snn_torch._cbuild``:
 the cache, the compiler flags, the fallback without a compiler), binds its step and observation
-for one state dtype, and checks them against the torch methods before first use: a few hundred
-steps from the task's own start states under actions across ``[-action_max, action_max]``,
+for one state dtype, and checks them against the torch methods before first use (once per task class, native
+parameters and dtype in a process): 100 steps of 64 rows from the task's own start states
+under actions across ``[-action_max, action_max]``,
 state, reward, termination and observation compared bit for bit. A native step that disagrees
 raises ``TaskError`` naming the task and what differed, instead of giving quietly different
 results; one that returns NaN or inf is caught where it is used, as the torch step's would be.
@@ -27,8 +28,12 @@ from snn_torch._cbuild import load_library
 __all__ = ["NativePlant", "native_plant", "prototypes"]
 
 _SUFFIX = {torch.float32: ("float32", "f32", "float"), torch.float64: ("float64", "f64", "double")}
-CHECK_STEPS = 200  # steps of the check against the torch step, from each of the task's start states
-CHECK_ROWS = 16
+CHECK_STEPS = 100  # steps of the check against the torch step, from each of the task's start states
+CHECK_ROWS = 64
+# (task class, NativeStep, dtype) already checked in this process: a task's step is a function of
+# its class and its native params (the native source sees nothing else), so a second task object
+# of the same kind (a champion test's copy of the fitness task) needs no second check
+_CHECKED: set[tuple] = set()
 
 
 def prototypes(native: NativeStep) -> str:
@@ -140,5 +145,10 @@ def native_plant(task: Task, dtype: torch.dtype) -> NativePlant | None:
         text = native.source.read_text()
         name = f"plant_{native.prefix}_{hashlib.sha256(text.encode()).hexdigest()[:10]}"
         library = load_library(name, native.source, prototypes(native))
-        bound[key] = None if library is None else NativePlant(task, library, dtype).check()
+        plant = None if library is None else NativePlant(task, library, dtype)
+        checked = (type(task), native, dtype)
+        if plant is not None and checked not in _CHECKED:
+            plant.check()
+            _CHECKED.add(checked)
+        bound[key] = plant
     return bound[key]
