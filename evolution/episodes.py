@@ -126,6 +126,8 @@ def _raise(task: Task, kind: int, row: int, code: int, episodes: int) -> None:
                         f"first: {where}")
     if kind == 2:
         raise TaskError(f"task {task.name!r}: step() returned reward holding NaN or inf at 1 row(s), first: {where}")
+    if kind == 5:
+        raise TaskError(f"task {task.name!r}: step() returned state holding NaN or inf at 1 row(s), first: {where}")
     if kind == 3:
         raise TaskError(f"task {task.name!r}: its native step returned error code {code} (rows from {where})")
     raise MemoryError("the native episode loop could not allocate its buffers")

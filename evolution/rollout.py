@@ -57,16 +57,27 @@ class RolloutResult:
         return self.returns if kind == "return" else self.steps.to(torch.float64)
 
 
+def _rebuild(like, parts):
+    """A tuple state like ``like`` from its parts: a NamedTuple by its fields, a plain tuple as one."""
+    return type(like)(*parts) if hasattr(like, "_fields") else tuple(parts)
+
+
 def _rows(t, index: Tensor):
     if isinstance(t, Tensor):
         return t[index]
-    return type(t)(*(x[index] for x in t))
+    return _rebuild(t, [x[index] for x in t])
 
 
 def _where_rows(alive: Tensor, new, old):
     if isinstance(new, Tensor):
         return torch.where(alive.view(-1, *([1] * (new.dim() - 1))), new, old)
-    return type(new)(*(_where_rows(alive, a, b) for a, b in zip(new, old, strict=True)))
+    return _rebuild(new, [_where_rows(alive, a, b) for a, b in zip(new, old, strict=True)])
+
+
+def _float_parts(state) -> list[Tensor]:
+    """The floating-point tensors of a state (a tensor, or a tuple of tensors)."""
+    parts = [state] if isinstance(state, Tensor) else list(state)
+    return [t for t in parts if isinstance(t, Tensor) and t.is_floating_point()]
 
 
 def _describe(task: Task, rows: Tensor, bad: Tensor, episodes: int) -> str:
@@ -129,13 +140,18 @@ def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=
     dtype, device = controller.weight.dtype, controller.weight.device
     if starts is None:
         starts = episode_starts(task, episodes, seed, device=device, dtype=dtype)
-    _check_batch(task, "reset()", "state", starts if isinstance(starts, Tensor) else starts[0], episodes)
+    for part in [starts] if isinstance(starts, Tensor) else list(starts):
+        _check_batch(task, "reset()", "state", part, episodes)
+    for part in _float_parts(starts):  # the starts themselves, before every genome gets a copy
+        bad = ~torch.isfinite(part.reshape(episodes, -1)).all(-1)
+        if bool(bad.any()):
+            first = ", ".join(str(e) for e in torch.nonzero(bad).flatten()[:8].tolist())
+            raise TaskError(f"task {task.name!r}: reset() returned state holding NaN or inf at {int(bad.sum())} of "
+                            f"{episodes} start(s), first: episode {first}")
     B = G * episodes
     rows = torch.arange(B, device=device)  # original row of each batch row
     state = _rows(starts, rows % episodes)
     alive = torch.ones(B, dtype=torch.bool, device=device)
-    if isinstance(state, Tensor):
-        _check_finite(task, "reset()", "state", state, alive, rows, episodes)
     if native and not record:  # whole episodes natively where the task and controller allow (the same bits)
         native = native_rollout(task, controller, starts, episodes=episodes, max_steps=max_steps)
         if native is not None:
@@ -170,9 +186,16 @@ def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=
             raise TaskError(f"task {task.name!r}: step() must return terminated as a bool tensor, got {terminated.dtype}")
         # One cheap test per step (a sum is finite unless some term is not, or it overflows); the
         # exact, row by row checks run only when it fails.
-        if not bool(torch.isfinite(obs.sum() + reward.sum())):
+        new_parts = _float_parts(new_state)
+        total = obs.sum() + reward.sum()
+        for part in new_parts:
+            total = total + part.sum()
+        if not bool(torch.isfinite(total)):
             _check_finite(task, "observe()", "observation", obs, alive, rows, episodes)
             _check_finite(task, "step()", "reward", reward, alive, rows, episodes)
+            for part in new_parts:  # the rows alive before this step: finished rows' states are not used
+                if part.shape[0] == n_rows:
+                    _check_finite(task, "step()", "state", part, alive, rows, episodes)
         if isinstance(new_state, Tensor) and new_state.shape[0] != n_rows:
             _check_batch(task, "step()", "state", new_state, n_rows)
         if every_row_alive:  # the usual case needs no masking (fewer ops per step)

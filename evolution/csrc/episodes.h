@@ -11,8 +11,9 @@
    step order) and steps[r] (control steps before the episode terminated, or max_steps). Rows
    run on `threads` threads, each taking the next row when one of its rows finishes: no thread
    waits for another until the end. Returns 0, or on the first bad row 1 (an observation NaN or
-   inf), 2 (a reward NaN or inf) or 3 (the plant step returned the nonzero code error[2]),
-   with error[1] the row; the outputs are then incomplete. */
+   inf), 2 (a reward NaN or inf), 3 (the plant step returned the nonzero code error[2]) or 5 (a
+   state the plant step returned holds NaN or inf), with error[1] the row; the outputs are then
+   incomplete. */
 #include <stdint.h>
 
 /* Rate-coded spiking controllers (evolution.SpikingController; RateControlKernel's step, then

@@ -10,7 +10,7 @@ typedef struct {
     native_observe_fn observe;
     const double *params;
     const unsigned char *starts;
-    int64_t row_bytes, episodes, n_obs, n_act, max_steps, rows;
+    int64_t row_bytes, width, episodes, n_obs, n_act, max_steps, rows;
     const T *low, *span;
     double *returns;
     int64_t *steps;
@@ -77,6 +77,16 @@ static int64_t FN(lanes_step_)(FN(lanes_t_) *L, const FN(plant_t_) *p, int64_t l
         if (!isfinite(L->reward[k])) {
             error[1] = L->row[k];
             return 2;
+        }
+        const unsigned char *next = L->next + k * p->row_bytes;
+        int finite = 1;
+        if (p->row_bytes == 4 * p->width)
+            for (int64_t j = 0; j < p->width; ++j) finite &= isfinite(((const float *)next)[j]) != 0;
+        else
+            for (int64_t j = 0; j < p->width; ++j) finite &= isfinite(((const double *)next)[j]) != 0;
+        if (!finite) {
+            error[1] = L->row[k];
+            return 5;
         }
         L->ret[k] += L->reward[k];
     }
@@ -314,7 +324,7 @@ int64_t FN(episodes_spiking_)(const void *step_fn, const void *observe_fn, const
                               int64_t decoder, double action_max, double threshold, int64_t settle, int64_t rows,
                               double *returns, int64_t *steps, int64_t *error, int threads) {
     const FN(plant_t_) plant = {(native_step_fn)step_fn, (native_observe_fn)observe_fn, plant_params,
-                                (const unsigned char *)starts, width * plant_bytes, episodes, n_obs, n_act,
+                                (const unsigned char *)starts, width * plant_bytes, width, episodes, n_obs, n_act,
                                 max_steps, rows, low, span, returns, steps};
     const FN(spiking_t_) ctrl = {w, v0, u0, z0, iconst, w_out, rest, sigma, keys, n, padded_size(n), window, substeps,
                                  decoder, settle, gain, dt, a, b, c, d, vpeak, period_s, action_max, threshold};
@@ -371,7 +381,7 @@ int64_t FN(episodes_sigmoid_)(const void *step_fn, const void *observe_fn, const
                               int64_t decoder, double action_max, int64_t settle, int64_t rows, double *returns,
                               int64_t *steps, int64_t *error, int threads) {
     const FN(plant_t_) plant = {(native_step_fn)step_fn, (native_observe_fn)observe_fn, plant_params,
-                                (const unsigned char *)starts, width * plant_bytes, episodes, n_obs, n_act,
+                                (const unsigned char *)starts, width * plant_bytes, width, episodes, n_obs, n_act,
                                 max_steps, rows, low, span, returns, steps};
     const FN(sigmoid_t_) ctrl = {w, n, n_bias, updates, first_output, decoder, settle, slope, action_max};
     const FN(plant_t_) *p = &plant;

@@ -2,7 +2,8 @@
    a line, state (x, v, t), the torch PointMass's operations in order. params: dt, mode, where mode
    0 is faithful, 1 drifts from the torch step by a rounding, 2 returns error code 7 once t reaches
    5, 3 pays a NaN reward at t = 30 for rows that start right of 0 (as the torch step does), 4
-   crashes (writes through a null pointer) once t reaches 3. */
+   crashes (writes through a null pointer) once t reaches 3, 5 returns a NaN velocity at t = 10
+   (as the torch step does). */
 #include <math.h>
 
 #include "native_plant.h"
@@ -23,8 +24,8 @@ int point_mass_step_##SUFFIX(const T *state, const double *action, T *next, doub
         const T v = s[1] + dt * (a - (T)0.5 * s[1]);                                            \
         const T x = s[0] + dt * v;                                                              \
         o[0] = mode == 1 ? x + (T)1e-3 * dt : x;                                                \
-        o[1] = v;                                                                               \
         o[2] = s[2] + (T)1;                                                                     \
+        o[1] = (mode == 5 && o[2] == (T)10) ? (T)NAN : v;                                       \
         const T rew = -(x * x);                                                                 \
         reward[r] = (mode == 3 && o[2] == (T)30 && x > (T)0) ? NAN : (double)rew;               \
         terminated[r] = (x < 0 ? -x : x) > (T)2;                                                \

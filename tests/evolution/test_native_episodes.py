@@ -167,6 +167,8 @@ class PointMass(Task):
         reward = -(x * x)
         if self.mode == 3:
             reward = torch.where((t == 30) & (x > 0), math.nan, reward)
+        if self.mode == 5:
+            v = torch.where(t == 10, math.nan, v)
         return torch.stack([x, v, t], -1), reward, x.abs() > 2.0
 
     def observe(self, state):
@@ -285,3 +287,15 @@ def test_the_static_map_ablation_runs_natively_with_the_same_bits(kind, spec):
     python = rollout(task, maps[1], episodes=2, native=False)
     _assert_same(native, python)
     assert int(native.steps.max()) > int(native.steps.min())
+
+
+def test_nan_in_the_state_a_step_returns_is_caught_on_both_paths():
+    """Not one step later on observe(), nor never on a last step: the state step() returns, for
+    the rows alive before the step."""
+    task = PointMass(5)
+    cfg, genomes = _point_mass_genomes()
+    for native in (True, False):
+        for max_steps in (60, 10):  # step 10 is the last one in the second case
+            with pytest.raises(TaskError, match=r"'point-mass-5': step\(\) returned state holding NaN or inf"):
+                rollout(task, make_controller(genomes, cfg, task, SigmoidSpec(), kind="sigmoid"), episodes=3, seed=1,
+                        native=native, max_steps=max_steps)

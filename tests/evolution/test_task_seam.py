@@ -191,3 +191,42 @@ def test_evolution_imports_nothing_from_tasks():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"
+
+
+class TupleMass(PointMass):
+    """PointMass with its state as a plain tuple ``(x, v)`` of ``[B]`` tensors, as the docs allow."""
+
+    name = "tuple-mass"
+
+    def __init__(self, bad_start: int | None = None) -> None:
+        self.bad_start = bad_start
+
+    def reset(self, batch, generator, *, device="cpu", dtype=torch.float32):
+        x, v = super().reset(batch, generator, device=device, dtype=dtype).unbind(-1)
+        if self.bad_start is not None:
+            x = x.clone()
+            x[self.bad_start] = math.nan
+        return (x, v)
+
+    def step(self, state, action):
+        new, reward, done = super().step(torch.stack(state, -1), action)
+        return tuple(new.unbind(-1)), reward, done
+
+    def observe(self, state):
+        return torch.stack(state, -1)
+
+
+@pytest.mark.parametrize("kind", ["snn", "sigmoid"])
+def test_a_plain_tuple_state_runs_as_its_stacked_twin(kind):
+    cfg = _config(kind)
+    genomes = _population(cfg)
+    plain = rollout(TupleMass(), make_controller(genomes, cfg, TupleMass(), kind=kind), episodes=3, seed=4)
+    stacked = rollout(PointMass(), make_controller(genomes, cfg, PointMass(), kind=kind), episodes=3, seed=4)
+    assert torch.equal(plain.returns, stacked.returns) and torch.equal(plain.steps, stacked.steps)
+
+
+def test_nan_in_a_tuple_start_is_caught_at_reset_counting_starts():
+    cfg = _config("sigmoid")
+    task = TupleMass(bad_start=1)
+    with pytest.raises(TaskError, match=r"reset\(\) returned state holding NaN or inf at 1 of 3 start\(s\), first: episode 1"):
+        rollout(task, make_controller(_population(cfg), cfg, task, kind="sigmoid"), episodes=3)
