@@ -37,7 +37,6 @@ __all__ = ["native_rollout", "native_episodes_available"]
 
 _CSRC = Path(__file__).resolve().parent / "csrc"
 _library = library_loader("episodes", _CSRC / "episodes.c", _CSRC / "episodes.h")
-_SIGMOID_DECODERS = {"sigmoid_force": 0, "bang_bang": 1}
 
 
 ENV_SWITCH = "SNN_NEAT_NATIVE_EPISODES"  # "0": the Python loop over control steps (C kernels stay on)
@@ -49,13 +48,13 @@ def native_episodes_available() -> bool:
     return os.environ.get(ENV_SWITCH) != "0" and _library() is not None
 
 
-def _controller_supported(controller, rows: int) -> bool:
+def _controller_supported(controller) -> bool:
     dtype, device = controller.weight.dtype, controller.weight.device
     if device.type != "cpu" or dtype not in (torch.float32, torch.float64) or controller.weight.requires_grad:
         return False
-    if isinstance(controller, SpikingController) and controller.sigma.dtype != dtype:
-        return False  # the torch decoder would promote; not worth a second kernel
     if isinstance(controller, SpikingController):
+        if controller.sigma.dtype != dtype:
+            return False  # the torch decoder would promote; not worth a second kernel
         probe = controller.initial_state(torch.zeros(1, dtype=torch.int64))
         return controller.network.path(probe.neurons) == "kernel"
     if isinstance(controller, SigmoidController):
@@ -71,16 +70,16 @@ def native_rollout(task: Task, controller, starts, *, episodes: int, max_steps: 
     from start ``e``) run to the end natively, or None where this path does not apply (no native
     step for the start states' dtype, a controller without a C kernel, no compiler, C kernels
     off). ``starts``: ``[episodes, width]`` start states, already checked by the caller."""
-    lib = _library() if os.environ.get(ENV_SWITCH) != "0" else None
-    if lib is None or not isinstance(starts, Tensor) or max_steps < 1:
+    if not native_episodes_available() or not isinstance(starts, Tensor) or max_steps < 1:
         return None
+    lib = _library()
     settle = 0
     if isinstance(controller, StaticMapController):  # the memory ablation's memoryless map
         controller, settle = controller.controller, controller.settle_steps
     plant = native_plant(task, starts.dtype)
     G = controller.num_genomes
     B = G * episodes
-    if plant is None or not plant.accepts(starts) or not _controller_supported(controller, B):
+    if plant is None or not plant.accepts(starts) or not _controller_supported(controller):
         return None
     dtype = controller.weight.dtype
     low, high = task.bounds(dtype=dtype)
@@ -107,13 +106,13 @@ def native_rollout(task: Task, controller, starts, *, episodes: int, max_steps: 
             k.iconst.data_ptr(), k.gain, None if keys is None else keys.data_ptr(), k.w_out.data_ptr(),
             None if k.rest is None else k.rest.data_ptr(), sigma.data_ptr(), controller.window.window,
             controller.window.period_s, controller.substeps, spec.dt_ms, p.a, p.b, p.c, p.d, p.v_peak,
-            DECODER_CODES[spec.decoder], float(task.action_max), float(spec.threshold), settle, *outputs)
+            DECODER_CODES[spec.decoder], controller.action_max, float(spec.threshold), settle, *outputs)
     else:
         net, spec = controller.network, controller.spec
         w_eff = net.effective_weight(dtype).contiguous()
         kind = getattr(lib, f"episodes_sigmoid_{suffix}")(
             *common, w_eff.data_ptr(), net.num_neurons, net.num_bias, net.slope, spec.updates_per_step,
-            controller.outputs[0], _SIGMOID_DECODERS[spec.decoder], float(controller.action_max), settle, *outputs)
+            controller.outputs[0], DECODER_CODES[spec.decoder], controller.action_max, settle, *outputs)
     if kind:
         _raise(task, int(kind), int(error[1]), int(error[2]), episodes)
     return returns, steps

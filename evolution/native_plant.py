@@ -23,7 +23,7 @@ import torch
 from torch import Tensor
 
 from evolution.task import NativeStep, Task, TaskError
-from snn_torch._cbuild import load_library
+from snn_torch._cbuild import kernels_enabled, load_library
 
 __all__ = ["NativePlant", "native_plant", "prototypes"]
 
@@ -103,8 +103,7 @@ class NativePlant:
             u = torch.rand(state.shape[0], task.action_size, generator=g, dtype=torch.float64) * 2.0 - 1.0
             u[0], u[1], u[2] = 1.0, -1.0, 0.0
             action = (u * a_max).to(self.dtype)
-            for field, ours, ref in (("observation", self.observe(state), task.observe(state)),):
-                _same(name, field, t, ours, ref)
+            _same(name, "observation", t, self.observe(state), task.observe(state))
             ref_state, ref_reward, ref_term = task.step(state, action)
             new, reward, term = self.step(state, action)
             _same(name, "state", t, new, ref_state)
@@ -121,9 +120,10 @@ def _describe(state) -> str:
 
 
 def _same(name: str, field: str, step: int, ours: Tensor, ref: Tensor) -> None:
-    same = ours.shape == ref.shape and bool(((ours == ref) | (torch.isnan(ours.double()) & torch.isnan(ref.double())))
-                                            .all()) if ours.dtype != torch.bool else torch.equal(ours, ref)
-    if not same:
+    """``TaskError`` unless ``ours`` and ``ref`` hold the same values (NaN where the other has NaN)."""
+    if not torch.equal(ours, ref) and not (ours.shape == ref.shape and ours.is_floating_point()
+                                           and torch.equal(ours.isnan(), ref.isnan())
+                                           and torch.equal(ours.nan_to_num(0.0), ref.nan_to_num(0.0))):
         raise TaskError(f"task {name!r}: its native step's {field} differs from the torch step's at check step "
                         f"{step} (the torch methods are the definition: the native source must repeat their "
                         f"operations in order, with sin/cos/exp from portable_math.h)")
@@ -136,7 +136,6 @@ def native_plant(task: Task, dtype: torch.dtype) -> NativePlant | None:
     native = task.native
     if native is None or dtype not in _SUFFIX or _SUFFIX[dtype][0] not in native.dtypes:
         return None
-    from snn_torch._cbuild import kernels_enabled
     if not kernels_enabled():
         return None
     bound = task.__dict__.setdefault("_native_plants", {})

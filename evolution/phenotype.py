@@ -63,7 +63,7 @@ NEAT_SIGMOID_SLOPE = 4.9  # [NEAT02]
 ENCODERS = ("current", "bernoulli")
 SPIKING_DECODERS = ("sigmoid_force", "bang_bang", "linear")
 SIGMOID_DECODERS = ("sigmoid_force", "bang_bang")
-DECODER_CODES = {"sigmoid_force": 0, "bang_bang": 1, "linear": 2}  # the C decoders' (recurrent_izhikevich.h)
+DECODER_CODES = {"sigmoid_force": 0, "bang_bang": 1, "linear": 2}  # the C decoders' (recurrent_izhikevich.h, episodes.h)
 
 
 @dataclass(frozen=True)
@@ -297,7 +297,7 @@ class SpikingController(_Phenotype):
             rest[: self.n_in] = (0.5 * spec.input_rate_max_hz if spec.encoder == "bernoulli"
                                  else rest_rate_hz(spec.neuron, spec.i_background + 0.5 * spec.i_input_max, spec.dt_ms))
             self.rest = rest.to(device=self.weight.device, dtype=self.weight.dtype)  # [n]
-        self.decoder_max = float(action_max)
+        self.action_max = float(action_max)
         if spec.decoder == "sigmoid_force":
             self.decoder: nn.Module = SigmoidForce(action_max)
         elif spec.decoder == "bang_bang":
@@ -377,7 +377,7 @@ class SpikingController(_Phenotype):
         window = RateWindowState(window.history, steps)
         if state.sigma.dtype != drive.dtype:  # a gain of another dtype promotes: the torch decoder
             return self._decode(drive, state.sigma), state._replace(neurons=neurons, window=window), counts
-        action = kernel.fn.decode(drive, state.sigma.contiguous(), DECODER_CODES[self.spec.decoder], self.decoder_max,
+        action = kernel.fn.decode(drive, state.sigma.contiguous(), DECODER_CODES[self.spec.decoder], self.action_max,
                                   self.spec.threshold)
         return action, state._replace(neurons=neurons, window=window), counts
 

@@ -153,9 +153,9 @@ def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=
     state = _rows(starts, rows % episodes)
     alive = torch.ones(B, dtype=torch.bool, device=device)
     if native and not record:  # whole episodes natively where the task and controller allow (the same bits)
-        native = native_rollout(task, controller, starts, episodes=episodes, max_steps=max_steps)
-        if native is not None:
-            returns, steps = native
+        ended = native_rollout(task, controller, starts, episodes=episodes, max_steps=max_steps)
+        if ended is not None:
+            returns, steps = ended
             return RolloutResult(returns.view(G, episodes), steps.view(G, episodes),
                                  (steps < max_steps).view(G, episodes))
     plant = native_plant(task, state.dtype) if isinstance(state, Tensor) else None

@@ -18,9 +18,11 @@
 
 #include "native_plant.h"
 #include "portable_math.h"
-/* the network kernel's lane functions and size dispatch; its exported steps stay hidden here */
+/* the network kernels' lane functions, size dispatch, decoders and sigmoid row update; their
+   exported functions stay hidden here */
 #pragma GCC visibility push(hidden)
 #include "recurrent_izhikevich.c"
+#include "recurrent_sigmoid.c"
 #pragma GCC visibility pop
 
 #define PASTE_(x, y) x##y

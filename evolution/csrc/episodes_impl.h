@@ -3,6 +3,7 @@
 #define FN(name) PASTE(name, SFX)
 #define IZH_LANES PASTE(PASTE(izh_, SFX), _lanes)
 #define IZH_DECODE PASTE(SFX, _decode)
+#define SIGMOID_ROW PASTE(PASTE(sigmoid_update_, SFX), _row)
 
 /* What every loop shares: the plant, the normalisation and the outputs. */
 typedef struct {
@@ -104,8 +105,6 @@ static int FN(lanes_done_)(FN(lanes_t_) *L, const FN(plant_t_) *p, int64_t k) {
     p->steps[L->row[k]] = L->term[k] ? t : t + 1;
     return 1;
 }
-
-static inline T FN(sigmoid_)(T x) { return (T)pm_sigmoid((double)x); }
 
 /* ---- spiking controllers ---- */
 
@@ -253,22 +252,15 @@ typedef struct {
 
 static void FN(sigmoid_act_)(T *values, const FN(sigmoid_t_) *c, const FN(plant_t_) *p, FN(lanes_t_) *L,
                              int64_t lanes, T *yc, double *acc) {
-    const int64_t n = c->n, n_in = p->n_obs, fixed = n_in + c->n_bias, K = p->n_act;
+    const int64_t n = c->n, K = p->n_act;
     /* settle > 0: evolution.ablation.StaticMapController's memoryless map: from values 0,
        `settle` control steps on this observation, in a scratch row */
     const int64_t updates = c->settle ? c->settle * c->updates : c->updates;
     for (int64_t k = 0; k < lanes; ++k) {
         T *y = c->settle ? values + LANES * n : values + k * n;
         if (c->settle) memset(y, 0, (size_t)n * sizeof(T));
-        const T *x = L->x + k * MAXN, *W = c->w + (L->row[k] / p->episodes) * n * n;
-        for (int64_t u = 0; u < updates; ++u) {
-            for (int64_t i = 0; i < n; ++i) yc[i] = i < n_in ? x[i] : i < fixed ? (T)1 : y[i];
-            for (int64_t j = 0; j < n; ++j) acc[j] = (double)(yc[0] * W[j]);
-            for (int64_t i = 1; i < n; ++i)
-                for (int64_t j = 0; j < n; ++j) acc[j] += (double)(yc[i] * W[i * n + j]);
-            for (int64_t j = 0; j < n; ++j)
-                y[j] = j < n_in ? x[j] : j < fixed ? (T)1 : FN(sigmoid_)(c->slope * (T)acc[j]);
-        }
+        SIGMOID_ROW(y, L->x + k * MAXN, c->w + (L->row[k] / p->episodes) * n * n, n, p->n_obs, c->n_bias, c->slope,
+                    updates, yc, acc);
         const T amax = (T)c->action_max;
         for (int64_t o = 0; o < K; ++o) {
             const T out = y[c->first_output + o];
@@ -426,3 +418,4 @@ int64_t FN(episodes_sigmoid_)(const void *step_fn, const void *observe_fn, const
 #undef FN
 #undef IZH_LANES
 #undef IZH_DECODE
+#undef SIGMOID_ROW

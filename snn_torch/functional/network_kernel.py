@@ -215,7 +215,8 @@ class RateControlKernel:
         ``portable_math``'s)."""
         B, K = drive.shape
         action = torch.empty_like(drive)
-        fn = _library().rate_decode_f32 if drive.dtype == torch.float32 else _library().rate_decode_f64
+        lib = _library()
+        fn = lib.rate_decode_f32 if drive.dtype == torch.float32 else lib.rate_decode_f64
         fn(drive.data_ptr(), sigma.data_ptr(), action.data_ptr(), B, K, int(decoder), float(action_max),
            float(threshold))
         return action
