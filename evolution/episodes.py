@@ -69,7 +69,8 @@ def native_rollout(task: Task, controller, starts, *, episodes: int, max_steps: 
     """``(returns [B] float64, steps [B] int64)`` of every row ``g * episodes + e`` (genome ``g``
     from start ``e``) run to the end natively, or None where this path does not apply (no native
     step for the start states' dtype, a controller without a C kernel, no compiler, C kernels
-    off). ``starts``: ``[episodes, width]`` start states, already checked by the caller."""
+    off). ``starts``: ``[episodes, width]`` start states shared by every genome, or ``[B, width]``
+    one per row, already checked by the caller."""
     if not native_episodes_available() or not isinstance(starts, Tensor) or max_steps < 1:
         return None
     lib = _library()
@@ -90,7 +91,7 @@ def native_rollout(task: Task, controller, starts, *, episodes: int, max_steps: 
     error = torch.zeros(3, dtype=torch.int64)
     suffix = "f32" if dtype == torch.float32 else "f64"
     common = (plant.step_ptr, plant.observe_ptr, plant.params.data_ptr(), starts.element_size(), plant.width,
-              starts.data_ptr(), episodes, task.observation_size, task.action_size, max_steps, low.data_ptr(),
+              starts.data_ptr(), starts.shape[0], episodes, task.observation_size, task.action_size, max_steps, low.data_ptr(),
               span.data_ptr())
     outputs = (B, returns.data_ptr(), steps.data_ptr(), error.data_ptr(), torch.get_num_threads())
     if isinstance(controller, SpikingController):

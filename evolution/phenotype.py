@@ -57,7 +57,8 @@ from snn_torch.modules.recurrent import PopulationRecurrentIzhikevich, Populatio
 
 __all__ = ["SpikingSpec", "SigmoidSpec", "SpikingController", "SigmoidController", "SpikingState",
            "SigmoidState", "rest_rate_hz", "used_slots", "local_slots", "NEAT_SIGMOID_SLOPE", "ENCODERS", "SPIKING_DECODERS",
-           "SIGMOID_DECODERS", "make_controller", "spiking_config", "SPIKING_SIGMA"]
+           "SIGMOID_DECODERS", "make_controller", "spiking_config", "SPIKING_SIGMA", "sigmoid_config", "task_config",
+           "controller_kind", "check_controller_config", "CONTROLLER_KINDS"]
 
 NEAT_SIGMOID_SLOPE = 4.9  # [NEAT02]
 ENCODERS = ("current", "bernoulli")
@@ -181,6 +182,60 @@ def spiking_config(num_inputs: int, num_outputs: int = 1, **overrides) -> NEATCo
     set any other field."""
     return NEATConfig(**{"num_inputs": num_inputs, "num_outputs": num_outputs, "num_bias": 0, **SPIKING_SIGMA,
                          **overrides})
+
+
+def sigmoid_config(num_inputs: int, num_outputs: int = 1, **overrides) -> NEATConfig:
+    """A ``NEATConfig`` for sigmoid NEAT on a task with ``num_inputs`` observations and
+    ``num_outputs`` actions: one bias input, and the decoder gain sigma (which a sigmoid
+    controller does not have) frozen and out of the compatibility distance; ``overrides`` set
+    any other field."""
+    return NEATConfig(**{"num_inputs": num_inputs, "num_outputs": num_outputs, "num_bias": 1, "sigma_mutate_rate": 0.0,
+                         "sigma_init_stdev": 0.0, "compatibility_sigma_coefficient": 0.0, **overrides})
+
+
+CONTROLLER_KINDS = ("snn", "sigmoid")
+
+
+def controller_kind(kind: str | None, spec: SpikingSpec | SigmoidSpec | None = None) -> str:
+    """The controller that ``kind`` and ``spec`` name together: the spec's type decides
+    (``SpikingSpec``: ``"snn"``, ``SigmoidSpec``: ``"sigmoid"``); ``kind`` may repeat it or stand
+    alone; neither: ``"snn"``. A kind that disagrees with the spec is a ``ValueError``."""
+    if spec is not None and not isinstance(spec, (SpikingSpec, SigmoidSpec)):
+        raise ValueError(f"spec must be a SpikingSpec or a SigmoidSpec, got {type(spec).__name__}")
+    if kind is not None and kind not in CONTROLLER_KINDS:
+        raise ValueError(f"kind must be one of {CONTROLLER_KINDS}, got {kind!r}")
+    named = None if spec is None else ("snn" if isinstance(spec, SpikingSpec) else "sigmoid")
+    if kind is not None and named is not None and kind != named:
+        raise ValueError(f"kind {kind!r} disagrees with spec {type(spec).__name__} (a {named!r} controller's): "
+                         "pass the spec alone, it decides")
+    return kind or named or "snn"
+
+
+def task_config(task, kind: str | SpikingSpec | SigmoidSpec = "snn", **overrides) -> NEATConfig:
+    """A ``NEATConfig`` for a controller of ``kind`` (``"snn"``, ``"sigmoid"``, or a spec) on
+    ``task`` (an ``evolution.Task``): its inputs and outputs from the task's observations and
+    actions, then ``spiking_config`` or ``sigmoid_config``; ``overrides`` set any other field."""
+    kind = controller_kind(None, kind) if isinstance(kind, (SpikingSpec, SigmoidSpec)) else controller_kind(kind)
+    make = spiking_config if kind == "snn" else sigmoid_config
+    return make(task.observation_size, task.action_size, **overrides)
+
+
+def check_controller_config(config: NEATConfig, kind: str, task) -> None:
+    """``ValueError`` naming the field where ``config`` cannot serve a ``kind`` controller on
+    ``task``: inputs and outputs other than the task's observations and actions, or, for sigmoid
+    NEAT, a decoder gain sigma that varies and counts in the compatibility distance (a sigmoid
+    controller has no gain, so it would split species over a gene with no effect)."""
+    if config.num_inputs != task.observation_size or config.num_outputs != task.action_size:
+        raise ValueError(f"task {task.name!r} has {task.observation_size} observations and {task.action_size} "
+                         f"actions, but the config has num_inputs={config.num_inputs} and "
+                         f"num_outputs={config.num_outputs} (task_config(task, kind) makes a matching one)")
+    sigma_varies = config.sigma_mutate_rate > 0 or config.sigma_init_stdev > 0
+    if kind == "sigmoid" and sigma_varies and config.compatibility_sigma_coefficient > 0:
+        raise ValueError(f"config.compatibility_sigma_coefficient = {config.compatibility_sigma_coefficient:g} "
+                         f"weighs the decoder gain sigma in the compatibility distance and sigma varies "
+                         f"(sigma_mutate_rate = {config.sigma_mutate_rate:g}, sigma_init_stdev = "
+                         f"{config.sigma_init_stdev:g}), but a sigmoid controller has no decoder gain: set them "
+                         "to 0 (sigmoid_config or task_config(task, 'sigmoid') does; is this a spiking config?)")
 
 
 def used_slots(genomes: Genomes) -> Tensor:
@@ -469,16 +524,12 @@ class SigmoidController(_Phenotype):
 
 
 def make_controller(genomes: Genomes, config: NEATConfig, task, spec: SpikingSpec | SigmoidSpec | None = None,
-                    *, kind: str = "snn", backend: str = "auto") -> SpikingController | SigmoidController:
-    """The controller of every genome for ``task`` (an ``evolution.task.Task``): ``kind`` ``"snn"``
-    (``SpikingController``) or ``"sigmoid"`` (``SigmoidController``)."""
+                    *, kind: str | None = None, backend: str = "auto") -> SpikingController | SigmoidController:
+    """The controller of every genome for ``task`` (an ``evolution.task.Task``): a
+    ``SpikingController`` for a ``SpikingSpec`` (or ``kind="snn"``), a ``SigmoidController`` for
+    a ``SigmoidSpec`` (or ``kind="sigmoid"``); the spec decides (``controller_kind``)."""
+    kind = controller_kind(kind, spec)
     common = dict(action_max=task.action_max, observation_size=task.observation_size, action_size=task.action_size)
     if kind == "snn":
-        if spec is not None and not isinstance(spec, SpikingSpec):
-            raise ValueError(f"a spiking controller takes a SpikingSpec, got {type(spec).__name__}")
         return SpikingController(genomes, config, spec, period_s=task.control_period_s, backend=backend, **common)
-    if kind == "sigmoid":
-        if spec is not None and not isinstance(spec, SigmoidSpec):
-            raise ValueError(f"a sigmoid controller takes a SigmoidSpec, got {type(spec).__name__}")
-        return SigmoidController(genomes, config, spec, backend=backend, **common)
-    raise ValueError(f"kind must be 'snn' or 'sigmoid', got {kind!r}")
+    return SigmoidController(genomes, config, spec, backend=backend, **common)

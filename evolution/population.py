@@ -22,8 +22,9 @@ from torch import Tensor
 
 from evolution.config import NEATConfig
 from evolution.rng import RunRNG
+from snn_torch.functional.counter_rng import mix64
 
-__all__ = ["Genomes", "initial_genomes", "check_invariants", "InvariantError", "reachability"]
+__all__ = ["Genomes", "initial_genomes", "random_genomes", "check_invariants", "InvariantError", "reachability"]
 
 
 class InvariantError(AssertionError):
@@ -92,6 +93,24 @@ class Genomes:
         return torch.where(self.enabled, self.weight, torch.zeros((), dtype=self.weight.dtype,
                                                                    device=self.weight.device))
 
+    def fingerprint(self) -> Tensor:
+        """``[R]`` int64: a hash of each run's whole population (expressed weights, genes, nodes,
+        sigma), a pure function of its contents: any change to a run's genomes gives, in
+        practice, another value; equal populations give equal values on any device."""
+        R = self.num_runs
+        words = []
+        for t in (self.effective_weight(), self.conn, self.node, self.sigma):
+            t = t.contiguous().reshape(R, -1)
+            if t.dtype == torch.bool:
+                words.append(t.to(torch.int64))
+            elif t.element_size() == 4:
+                words.append(t.view(torch.int32).to(torch.int64))
+            else:
+                words.append(t.view(torch.int64))
+        w = torch.cat(words, 1)
+        position = mix64(torch.arange(w.shape[1], dtype=torch.int64, device=w.device))
+        return mix64(mix64(w ^ position).sum(1))  # mixed per word, then a (wrapping) sum: order-sensitive
+
     def num_genes(self) -> Tensor:
         """Connection genes per genome (enabled or not), ``[R, P]``."""
         return self.conn.flatten(2).sum(-1)
@@ -135,6 +154,43 @@ def initial_genomes(config: NEATConfig, rng: RunRNG, *, dtype: torch.dtype = tor
     sigma = config.sigma_init_mean + config.sigma_init_stdev * rng.randn(P, dtype=dtype)
     sigma = sigma.clamp(config.sigma_min_value, config.sigma_max_value)
     return Genomes(weight=weight, conn=conn, enabled=conn.clone(), node=node, sigma=sigma)
+
+
+def random_genomes(config: NEATConfig, *, runs: int = 1, hidden: int = 0, density: float = 0.5, seed: int = 0,
+                   device: torch.device | str = "cpu", dtype: torch.dtype = torch.float32) -> Genomes:
+    """``[runs, config.pop_size]`` random genomes that hold every invariant (``check_invariants``),
+    for benchmarks, tests and the curious: each has the first ``hidden`` hidden slots, and each
+    possible gene between its nodes (none into inputs or bias; cycles and self-loops unless
+    ``config.feed_forward``) exists with probability ``density``, enabled, with a weight drawn as
+    the start population's (``weight_init_mean + weight_init_stdev * N(0, 1)``, clamped); sigma
+    as the start population's. Drawn from a CPU generator seeded by ``seed``: the same genomes
+    on every device."""
+    for name, value, ok in (("runs", runs, isinstance(runs, int) and runs >= 1),
+                            ("hidden", hidden, isinstance(hidden, int) and 0 <= hidden <= config.max_hidden),
+                            ("density", density, isinstance(density, (int, float)) and 0.0 <= density <= 1.0)):
+        if not ok or isinstance(value, bool):
+            raise ValueError(f"random_genomes: {name} = {value!r} is not valid (runs >= 1, 0 <= hidden <= "
+                             f"config.max_hidden = {config.max_hidden}, density in [0, 1])")
+    R, P, N = runs, config.pop_size, config.num_nodes
+    generator = torch.Generator().manual_seed(int(seed))
+    node = torch.zeros(N, dtype=torch.bool)
+    node[: config.first_hidden + hidden] = True
+    possible = node.unsqueeze(1) & node.unsqueeze(0)
+    possible[:, : config.first_output] = False  # nothing leads into an input or bias node
+    if config.feed_forward:  # inputs and bias, then hidden in slot order, then outputs: a topological order
+        slot = torch.arange(N)
+        rank = torch.where((slot >= config.first_output) & (slot < config.first_hidden), slot + N, slot)
+        possible &= rank.unsqueeze(1) < rank.unsqueeze(0)
+    conn = (torch.rand(R, P, N, N, generator=generator, dtype=torch.float64) < density) & possible
+    weight = config.weight_init_mean + config.weight_init_stdev * torch.randn(R, P, N, N, generator=generator,
+                                                                                dtype=torch.float64)
+    weight = torch.where(conn, weight.clamp(config.weight_min_value, config.weight_max_value), 0.0)
+    sigma = config.sigma_init_mean + config.sigma_init_stdev * torch.randn(R, P, generator=generator,
+                                                                             dtype=torch.float64)
+    sigma = sigma.clamp(config.sigma_min_value, config.sigma_max_value)
+    genomes = Genomes(weight=weight.to(dtype), conn=conn, enabled=conn.clone(), node=node.expand(R, P, N).clone(),
+                      sigma=sigma.to(dtype))
+    return genomes.to(device)
 
 
 def reachability(conn: Tensor) -> Tensor:

@@ -13,7 +13,8 @@ the same bits), and the loop here (traces, other controllers) steps the plant na
 ``TaskFitness`` turns a task into NEAT's ``fitness_fn(genomes) -> [R, P]``: the mean over
 episodes of the return or the steps survived (``task.fitness``). Start states come from
 ``task.reset`` with a generator seeded by ``seed``: every genome, in every generation, faces
-the same starts, so fitness is a pure function of the genome (resume after a kill stays exact).
+the same starts, so fitness is a pure function of the genome (resume after a kill stays exact);
+or, with ``fresh_starts=True``, new starts each generation, seeded by the run's population.
 
 Every operation is row-wise and every sum runs in slot order, so a genome's fitness does not
 depend on its batch, its position, the compaction or which code path ran the network (C
@@ -30,12 +31,18 @@ from torch import Tensor
 from evolution.config import NEATConfig
 from evolution.episodes import native_rollout
 from evolution.native_plant import native_plant
-from evolution.phenotype import SigmoidSpec, SpikingSpec, make_controller
+from evolution.phenotype import (
+    SigmoidSpec,
+    SpikingSpec,
+    check_controller_config,
+    controller_kind,
+    make_controller,
+)
 from evolution.population import Genomes
 from evolution.task import Task, TaskError
 from snn_torch.functional.scalars import scalar
 
-__all__ = ["rollout", "RolloutResult", "TaskFitness", "evaluate", "episode_starts"]
+__all__ = ["rollout", "RolloutResult", "TaskFitness", "evaluate", "episode_starts", "fresh_starts"]
 
 
 @dataclass
@@ -103,12 +110,52 @@ def _check_finite(task: Task, method: str, field: str, value: Tensor, alive: Ten
                         f"{_describe(task, rows, bad, episodes)}")
 
 
+def _check_starts(task: Task, starts, episodes: int, B: int) -> int:
+    """The rows of ``starts`` (``episodes``: shared by every genome; ``B``: one per row), checked:
+    shapes, and no NaN or inf in the starts themselves (before every genome gets a copy)."""
+    parts = [starts] if isinstance(starts, Tensor) else list(starts)
+    if not parts or not all(isinstance(part, Tensor) for part in parts):
+        raise TaskError(f"task {task.name!r}: start states must be a tensor or a tuple of tensors")
+    n_starts = parts[0].shape[0] if parts[0].dim() else -1
+    if n_starts not in (episodes, B):
+        raise TaskError(f"task {task.name!r}: start states have {n_starts} rows, expected {episodes} (one per "
+                        f"episode, shared by every genome) or {B} (one per row)")
+    for part in parts:
+        _check_batch(task, "reset()", "state", part, n_starts)
+    for part in _float_parts(starts):
+        bad = ~torch.isfinite(part.reshape(n_starts, -1)).all(-1)
+        if bool(bad.any()):
+            first = torch.nonzero(bad).flatten()[:8].tolist()
+            where = (", ".join(f"episode {e}" for e in first) if n_starts == episodes
+                     else ", ".join(f"(genome {r // episodes}, episode {r % episodes})" for r in first))
+            raise TaskError(f"task {task.name!r}: reset() returned state holding NaN or inf at {int(bad.sum())} of "
+                            f"{n_starts} start(s), first: {where}")
+    return n_starts
+
+
 def episode_starts(task: Task, episodes: int, seed: int, *, device: torch.device | str = "cpu",
                    dtype: torch.dtype = torch.float32):
     """``task.reset(episodes, generator)`` with a generator seeded by ``seed``: the start states
     every genome is evaluated from."""
     generator = torch.Generator(device="cpu").manual_seed(int(seed))
     return task.reset(episodes, generator, device=device, dtype=dtype)
+
+
+def fresh_starts(task: Task, genomes: Genomes, episodes: int, seed: int, *, device: torch.device | str = "cpu",
+                 dtype: torch.dtype = torch.float32):
+    """One start state per row of ``genomes`` x ``episodes`` (``[R * P * episodes, ...]``): every
+    genome of run ``r`` starts from ``task.reset(episodes, generator)`` with a generator seeded by
+    ``seed`` and the run population's ``fingerprint``. So each generation brings new starts (its
+    population differs), the same ones again after a resume (it is restored bit for bit), and a
+    run's starts do not depend on the other runs in the batch."""
+    R, P = genomes.num_runs, genomes.pop_size
+    per_run = [episode_starts(task, episodes, (key + int(seed) * 0x9E3779B97F4A7C15) % 2**64, device=device,
+                              dtype=dtype) for key in genomes.fingerprint().tolist()]
+    row = torch.arange(R * P * episodes, device=device)
+    index = torch.div(row, P * episodes, rounding_mode="floor") * episodes + row % episodes
+    if isinstance(per_run[0], Tensor):
+        return torch.cat(per_run)[index]
+    return _rebuild(per_run[0], [torch.cat(parts)[index] for parts in zip(*per_run, strict=True)])
 
 
 def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=None, max_steps: int | None = None,
@@ -119,8 +166,9 @@ def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=
         task: an ``evolution.task.Task``.
         controller: ``SpikingController`` or ``SigmoidController`` (``evolution.phenotype``)
             over ``G`` genomes.
-        episodes: episodes per genome; starts: their start states (``[episodes, ...]``, as
-            ``task.reset`` returns), default ``episode_starts(task, episodes, seed)``.
+        episodes: episodes per genome; starts: their start states, ``[episodes, ...]`` (as
+            ``task.reset`` returns them) shared by every genome, or ``[G * episodes, ...]``, one
+            per row (``fresh_starts``); default ``episode_starts(task, episodes, seed)``.
         max_steps: episode length (default ``task.max_steps``).
         record: keep a trace of every control step (no compaction; for plots).
         compact_below: drop finished rows when fewer than this fraction of the batch is alive.
@@ -140,17 +188,10 @@ def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=
     dtype, device = controller.weight.dtype, controller.weight.device
     if starts is None:
         starts = episode_starts(task, episodes, seed, device=device, dtype=dtype)
-    for part in [starts] if isinstance(starts, Tensor) else list(starts):
-        _check_batch(task, "reset()", "state", part, episodes)
-    for part in _float_parts(starts):  # the starts themselves, before every genome gets a copy
-        bad = ~torch.isfinite(part.reshape(episodes, -1)).all(-1)
-        if bool(bad.any()):
-            first = ", ".join(str(e) for e in torch.nonzero(bad).flatten()[:8].tolist())
-            raise TaskError(f"task {task.name!r}: reset() returned state holding NaN or inf at {int(bad.sum())} of "
-                            f"{episodes} start(s), first: episode {first}")
     B = G * episodes
+    n_starts = _check_starts(task, starts, episodes, B)
     rows = torch.arange(B, device=device)  # original row of each batch row
-    state = _rows(starts, rows % episodes)
+    state = _rows(starts, rows % n_starts)
     alive = torch.ones(B, dtype=torch.bool, device=device)
     if native and not record:  # whole episodes natively where the task and controller allow (the same bits)
         ended = native_rollout(task, controller, starts, episodes=episodes, max_steps=max_steps)
@@ -245,23 +286,38 @@ class TaskFitness:
     genome's return or steps survived (``task.fitness``).
 
     Args:
-        task: the task; config: the NEAT config (inputs = observations, outputs = actions).
+        task: the task; config: the NEAT config (inputs = observations, outputs = actions;
+            ``task_config`` makes one), checked against the task and the controller here.
         kind: ``"snn"`` (NEAT-SNN) or ``"sigmoid"`` (sigmoid NEAT); spec: its ``SpikingSpec`` or
-            ``SigmoidSpec`` (default: the class defaults).
+            ``SigmoidSpec``. The spec decides the controller (``kind`` may be left out); neither
+            given: NEAT-SNN with the ``SpikingSpec`` defaults; a kind and a spec that disagree: an error.
         episodes, seed, starts, max_steps: as ``rollout``; backend: the spiking network's.
+        fresh_starts: draw new start states each generation (``fresh_starts``: seeded by ``seed``
+            and each run's population, so a resumed run sees the same ones) instead of the same
+            ``episodes`` starts for every generation. Use it for a plant with random starts,
+            where fixed starts let the champions learn those starts; leave it off where the
+            starts are the task (the paper's cart-poles) or for a fitness that is a pure
+            function of the genome.
     """
 
-    def __init__(self, task: Task, config: NEATConfig, kind: str = "snn", spec: SpikingSpec | SigmoidSpec | None = None,
-                 *, episodes: int = 1, seed: int = 0, starts=None, max_steps: int | None = None,
-                 backend: str = "auto") -> None:
-        self.task, self.config, self.kind, self.spec = task.validate(), config, kind, spec
+    def __init__(self, task: Task, config: NEATConfig, kind: str | None = None,
+                 spec: SpikingSpec | SigmoidSpec | None = None, *, episodes: int = 1, seed: int = 0, starts=None,
+                 max_steps: int | None = None, backend: str = "auto", fresh_starts: bool = False) -> None:
+        self.task, self.config, self.spec = task.validate(), config, spec
+        self.kind = controller_kind(kind, spec)
+        check_controller_config(config, self.kind, task)
+        if fresh_starts and starts is not None:
+            raise ValueError("TaskFitness takes fixed starts= or fresh_starts=True, not both")
         self.episodes, self.seed, self.starts, self.max_steps, self.backend = episodes, seed, starts, max_steps, backend
-        if kind not in ("snn", "sigmoid"):
-            raise ValueError(f"kind must be 'snn' or 'sigmoid', got {kind!r}")
+        self.fresh_starts = bool(fresh_starts)
 
     def rollout(self, genomes: Genomes, *, record: bool = False) -> RolloutResult:
         controller = make_controller(genomes, self.config, self.task, self.spec, kind=self.kind, backend=self.backend)
-        return rollout(self.task, controller, episodes=self.episodes, seed=self.seed, starts=self.starts,
+        starts = self.starts
+        if self.fresh_starts:
+            starts = fresh_starts(self.task, genomes, self.episodes, self.seed, device=controller.weight.device,
+                                  dtype=controller.weight.dtype)
+        return rollout(self.task, controller, episodes=self.episodes, seed=self.seed, starts=starts,
                        max_steps=self.max_steps, record=record)
 
     def __call__(self, genomes: Genomes) -> Tensor:
@@ -269,7 +325,7 @@ class TaskFitness:
         return result.fitness(self.task.fitness).mean(-1).view(genomes.num_runs, genomes.pop_size)
 
 
-def evaluate(task: Task, genomes: Genomes, config: NEATConfig, kind: str = "snn",
+def evaluate(task: Task, genomes: Genomes, config: NEATConfig, kind: str | None = None,
              spec: SpikingSpec | SigmoidSpec | None = None, **kwargs) -> Tensor:
     """``TaskFitness(task, config, kind, spec, **kwargs)(genomes)``: ``[R, P]`` fitness."""
     return TaskFitness(task, config, kind, spec, **kwargs)(genomes)

@@ -4,8 +4,9 @@
    snn_torch._cbuild reads these prototypes to declare the ctypes signatures.
 
    Common arguments. Plant: step_fn and observe_fn (the plant's functions for its state dtype,
-   plant_bytes 4 or 8 per element), plant_params, width (state columns), starts [episodes][width]
-   (row r starts from starts[r % episodes] and runs network r / episodes), n_obs observations,
+   plant_bytes 4 or 8 per element), plant_params, width (state columns), starts [start_rows][width]
+   (row r starts from starts[r % start_rows] and runs network r / episodes; start_rows is
+   episodes for starts shared by every network, or rows for a start per row), n_obs observations,
    n_act actions, max_steps control steps at most. Normalisation: x01 = clamp((T(obs) - low) /
    span, 0, 1), as the rollout computes it. Outputs: returns[r] (sum of the rewards, double, in
    step order) and steps[r] (control steps before the episode terminated, or max_steps). Rows
@@ -26,7 +27,7 @@
    evolution.ablation.StaticMapController's memoryless map, `settle` control steps from rest on
    the observation, the last one's action. */
 int64_t episodes_spiking_f32(const void *step_fn, const void *observe_fn, const double *plant_params,
-                             int64_t plant_bytes, int64_t width, const void *starts, int64_t episodes,
+                             int64_t plant_bytes, int64_t width, const void *starts, int64_t start_rows, int64_t episodes,
                              int64_t n_obs, int64_t n_act, int64_t max_steps, const float *low, const float *span,
                              const float *w, const float *v0, const float *u0, const float *z0, int64_t n,
                              const float *iconst, float gain, const int64_t *keys, const float *w_out,
@@ -35,7 +36,7 @@ int64_t episodes_spiking_f32(const void *step_fn, const void *observe_fn, const 
                              int64_t decoder, double action_max, double threshold, int64_t settle, int64_t rows,
                              double *returns, int64_t *steps, int64_t *error, int threads);
 int64_t episodes_spiking_f64(const void *step_fn, const void *observe_fn, const double *plant_params,
-                             int64_t plant_bytes, int64_t width, const void *starts, int64_t episodes,
+                             int64_t plant_bytes, int64_t width, const void *starts, int64_t start_rows, int64_t episodes,
                              int64_t n_obs, int64_t n_act, int64_t max_steps, const double *low,
                              const double *span, const double *w, const double *v0, const double *u0,
                              const double *z0, int64_t n, const double *iconst, double gain, const int64_t *keys,
@@ -49,13 +50,13 @@ int64_t episodes_spiking_f64(const void *step_fn, const void *observe_fn, const 
    synchronous updates of sigmoid(slope * sum_i y_i w_ij) per control step (values start at 0),
    actions read from nodes first_output.. by decoder 0 (a_max (2 y - 1)) or 1 (+-a_max on y > 0.5). */
 int64_t episodes_sigmoid_f32(const void *step_fn, const void *observe_fn, const double *plant_params,
-                             int64_t plant_bytes, int64_t width, const void *starts, int64_t episodes,
+                             int64_t plant_bytes, int64_t width, const void *starts, int64_t start_rows, int64_t episodes,
                              int64_t n_obs, int64_t n_act, int64_t max_steps, const float *low, const float *span,
                              const float *w, int64_t n, int64_t n_bias, float slope, int64_t updates,
                              int64_t first_output, int64_t decoder, double action_max, int64_t settle,
                              int64_t rows, double *returns, int64_t *steps, int64_t *error, int threads);
 int64_t episodes_sigmoid_f64(const void *step_fn, const void *observe_fn, const double *plant_params,
-                             int64_t plant_bytes, int64_t width, const void *starts, int64_t episodes,
+                             int64_t plant_bytes, int64_t width, const void *starts, int64_t start_rows, int64_t episodes,
                              int64_t n_obs, int64_t n_act, int64_t max_steps, const double *low,
                              const double *span, const double *w, int64_t n, int64_t n_bias, double slope,
                              int64_t updates, int64_t first_output, int64_t decoder, double action_max,

@@ -11,7 +11,7 @@ typedef struct {
     native_observe_fn observe;
     const double *params;
     const unsigned char *starts;
-    int64_t row_bytes, width, episodes, n_obs, n_act, max_steps, rows;
+    int64_t row_bytes, width, start_rows, episodes, n_obs, n_act, max_steps, rows;
     const T *low, *span;
     double *returns;
     int64_t *steps;
@@ -40,7 +40,7 @@ static void FN(lanes_free_)(FN(lanes_t_) *L) {
 }
 
 static void FN(lanes_load_)(FN(lanes_t_) *L, const FN(plant_t_) *p, int64_t k, int64_t r) {
-    memcpy(L->state + k * p->row_bytes, p->starts + (r % p->episodes) * p->row_bytes, (size_t)p->row_bytes);
+    memcpy(L->state + k * p->row_bytes, p->starts + (r % p->start_rows) * p->row_bytes, (size_t)p->row_bytes);
     L->row[k] = r;
     L->t[k] = 0;
     L->ret[k] = 0.0;
@@ -308,7 +308,7 @@ static void FN(fail_)(int64_t *error, int64_t kind, int64_t row, int64_t code) {
 }
 
 int64_t FN(episodes_spiking_)(const void *step_fn, const void *observe_fn, const double *plant_params,
-                              int64_t plant_bytes, int64_t width, const void *starts, int64_t episodes,
+                              int64_t plant_bytes, int64_t width, const void *starts, int64_t start_rows, int64_t episodes,
                               int64_t n_obs, int64_t n_act, int64_t max_steps, const T *low, const T *span,
                               const T *w, const T *v0, const T *u0, const T *z0, int64_t n, const T *iconst, T gain,
                               const int64_t *keys, const T *w_out, const T *rest, const T *sigma, int64_t window,
@@ -316,7 +316,7 @@ int64_t FN(episodes_spiking_)(const void *step_fn, const void *observe_fn, const
                               int64_t decoder, double action_max, double threshold, int64_t settle, int64_t rows,
                               double *returns, int64_t *steps, int64_t *error, int threads) {
     const FN(plant_t_) plant = {(native_step_fn)step_fn, (native_observe_fn)observe_fn, plant_params,
-                                (const unsigned char *)starts, width * plant_bytes, width, episodes, n_obs, n_act,
+                                (const unsigned char *)starts, width * plant_bytes, width, start_rows, episodes, n_obs, n_act,
                                 max_steps, rows, low, span, returns, steps};
     const FN(spiking_t_) ctrl = {w, v0, u0, z0, iconst, w_out, rest, sigma, keys, n, padded_size(n), window, substeps,
                                  decoder, settle, gain, dt, a, b, c, d, vpeak, period_s, action_max, threshold};
@@ -367,13 +367,13 @@ int64_t FN(episodes_spiking_)(const void *step_fn, const void *observe_fn, const
 }
 
 int64_t FN(episodes_sigmoid_)(const void *step_fn, const void *observe_fn, const double *plant_params,
-                              int64_t plant_bytes, int64_t width, const void *starts, int64_t episodes,
+                              int64_t plant_bytes, int64_t width, const void *starts, int64_t start_rows, int64_t episodes,
                               int64_t n_obs, int64_t n_act, int64_t max_steps, const T *low, const T *span,
                               const T *w, int64_t n, int64_t n_bias, T slope, int64_t updates, int64_t first_output,
                               int64_t decoder, double action_max, int64_t settle, int64_t rows, double *returns,
                               int64_t *steps, int64_t *error, int threads) {
     const FN(plant_t_) plant = {(native_step_fn)step_fn, (native_observe_fn)observe_fn, plant_params,
-                                (const unsigned char *)starts, width * plant_bytes, width, episodes, n_obs, n_act,
+                                (const unsigned char *)starts, width * plant_bytes, width, start_rows, episodes, n_obs, n_act,
                                 max_steps, rows, low, span, returns, steps};
     const FN(sigmoid_t_) ctrl = {w, n, n_bias, updates, first_output, decoder, settle, slope, action_max};
     const FN(plant_t_) *p = &plant;

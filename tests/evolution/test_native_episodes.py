@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from evolution import NEAT, Task, TaskError, episode_starts, make_controller, rollout
+from evolution import NEAT, Task, TaskError, episode_starts, fresh_starts, make_controller, rollout
 from evolution.episodes import native_episodes_available, native_rollout
 from evolution.native_plant import native_plant
 from evolution.phenotype import SigmoidSpec, SpikingSpec
@@ -190,6 +190,20 @@ def test_a_users_native_plant_runs_whole_episodes():
     starts = task.reset(4, torch.Generator().manual_seed(3))
     ctrl = make_controller(genomes, cfg, task, SigmoidSpec(), kind="sigmoid")
     assert native_rollout(task, ctrl, starts, episodes=4, max_steps=60) is not None  # it did run natively
+
+
+@pytest.mark.parametrize("kind", ["snn", "sigmoid"])
+def test_a_start_per_row_runs_natively_to_the_python_loops_bits(kind):
+    """``fresh_starts`` gives every run its own starts: one start state per row, in C as in torch."""
+    task = PointMass(0)
+    cfg = controller_config(kind)
+    genomes = _genomes(cfg, seeds=(0, 1, 2))
+    starts = fresh_starts(task, genomes, 3, 11)
+    assert starts.shape == (3 * cfg.pop_size * 3, 3)
+    native, python = _both(task, genomes, cfg, None, kind, episodes=3, starts=starts)
+    _assert_same(native, python)
+    shared = rollout(task, make_controller(genomes, cfg, task, kind=kind), episodes=3, seed=11)
+    assert not torch.equal(native.returns, shared.returns)  # the per-row starts were used
 
 
 @pytest.mark.parametrize("mode, message", [(1, "native step's state differs from the torch step's"),

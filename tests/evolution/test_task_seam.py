@@ -37,7 +37,8 @@ class PointMass(Task):
 
 def _config(kind, **kw):
     return NEATConfig(num_inputs=2, num_outputs=1, num_bias=0 if kind == "snn" else 1, max_hidden=6, pop_size=24,
-                      **({"sigma_init_mean": 0.005, "sigma_mutate_power": 0.001} if kind == "snn" else {}), **kw)
+                      **({"sigma_init_mean": 0.005, "sigma_mutate_power": 0.001} if kind == "snn" else
+                         {"sigma_mutate_rate": 0.0, "compatibility_sigma_coefficient": 0.0}), **kw)
 
 
 @pytest.mark.parametrize("kind", ["snn", "sigmoid"])

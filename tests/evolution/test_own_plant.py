@@ -1,0 +1,207 @@
+"""A user's own plant through the public API: configs made for the task, the spec deciding the
+controller, random genomes, and fresh start states per generation (issue 32, items 3-5)."""
+
+import textwrap
+from pathlib import Path
+
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from evolution import (
+    NEAT,
+    NEATConfig,
+    SigmoidController,
+    SigmoidSpec,
+    SpikingController,
+    SpikingSpec,
+    TaskFitness,
+    check_invariants,
+    fresh_starts,
+    make_controller,
+    random_genomes,
+    rollout,
+    sigmoid_config,
+    spiking_config,
+    task_config,
+)
+from tests.evolution.test_task_seam import PointMass
+
+# --- item 3: the spec decides; a config made for the other controller is an error ------------------
+
+def test_a_spiking_config_for_a_sigmoid_controller_is_an_error_naming_the_field():
+    with pytest.raises(ValueError, match=r"compatibility_sigma_coefficient = 100 .*sigmoid controller has no decoder gain"):
+        TaskFitness(PointMass(), spiking_config(2, 1), "sigmoid")
+
+
+def test_a_kind_that_disagrees_with_the_spec_fails_at_construction():
+    cfg = sigmoid_config(2, 1, pop_size=10)
+    with pytest.raises(ValueError, match=r"kind 'snn' disagrees with spec SigmoidSpec"):
+        TaskFitness(PointMass(), cfg, "snn", SigmoidSpec())
+    with pytest.raises(ValueError, match=r"kind 'sigmoid' disagrees with spec SpikingSpec"):
+        make_controller(NEAT(cfg).ask(), cfg, PointMass(), SpikingSpec(), kind="sigmoid")
+    with pytest.raises(ValueError, match=r"spec must be a SpikingSpec or a SigmoidSpec, got dict"):
+        TaskFitness(PointMass(), cfg, spec={"decoder": "bang_bang"})
+    with pytest.raises(ValueError, match=r"kind must be one of \('snn', 'sigmoid'\), got 'lif'"):
+        TaskFitness(PointMass(), cfg, "lif")
+
+
+def test_a_config_for_another_layout_fails_at_construction_not_at_the_first_evaluation():
+    with pytest.raises(ValueError, match=r"2 observations and 1 actions, but the config has num_inputs=4"):
+        TaskFitness(PointMass(), sigmoid_config(4, 1), "sigmoid")
+
+
+def test_the_spec_alone_picks_the_controller():
+    task = PointMass()
+    cfg = task_config(task, "sigmoid", pop_size=12)
+    genomes = NEAT(cfg, seeds=[0, 1]).ask()
+    assert isinstance(make_controller(genomes, cfg, task, SigmoidSpec()), SigmoidController)
+    spiking = task_config(task, pop_size=12)
+    assert isinstance(make_controller(NEAT(spiking).ask(), spiking, task), SpikingController)
+    by_spec = TaskFitness(task, cfg, spec=SigmoidSpec(decoder="bang_bang"), episodes=2)
+    by_both = TaskFitness(task, cfg, "sigmoid", SigmoidSpec(decoder="bang_bang"), episodes=2)
+    assert by_spec.kind == "sigmoid"
+    assert torch.equal(by_spec(genomes), by_both(genomes))
+
+
+def test_task_config_reads_the_layout_from_the_task():
+    task = PointMass()
+    sig = task_config(task, "sigmoid", max_hidden=5)
+    assert (sig.num_inputs, sig.num_outputs, sig.num_bias, sig.max_hidden) == (2, 1, 1, 5)
+    assert sig.compatibility_sigma_coefficient == 0.0 and sig.sigma_mutate_rate == 0.0
+    assert task_config(task, SigmoidSpec(), max_hidden=5) == sig
+    assert task_config(task, SpikingSpec()) == spiking_config(2, 1) == task_config(task)
+    TaskFitness(task, sig, "sigmoid")  # accepted as it is
+
+
+# --- item 4: random genomes -------------------------------------------------------------------------
+
+@settings(max_examples=25, deadline=None)
+@given(inputs=st.integers(1, 4), bias=st.integers(0, 2), outputs=st.integers(1, 3), max_hidden=st.integers(0, 6),
+       data=st.data(), feed_forward=st.booleans(), density=st.floats(0.0, 1.0), seed=st.integers(0, 2**31))
+def test_random_genomes_hold_every_invariant(inputs, bias, outputs, max_hidden, data, feed_forward, density, seed):
+    cfg = NEATConfig(num_inputs=inputs, num_bias=bias, num_outputs=outputs, max_hidden=max_hidden, pop_size=5,
+                     feed_forward=feed_forward)
+    hidden = data.draw(st.integers(0, max_hidden))
+    genomes = random_genomes(cfg, runs=2, hidden=hidden, density=density, seed=seed)
+    check_invariants(genomes, cfg)
+    assert bool((genomes.num_hidden(cfg) == hidden).all())
+    assert bool((genomes.enabled == genomes.conn).all())
+    again = random_genomes(cfg, runs=2, hidden=hidden, density=density, seed=seed)
+    assert all(torch.equal(a, b) for a, b in zip(genomes.tensors().values(), again.tensors().values(), strict=True))
+
+
+def test_random_genomes_density_spans_none_to_every_possible_gene():
+    cfg = NEATConfig(num_inputs=2, num_bias=1, num_outputs=1, max_hidden=3, pop_size=4)
+    assert int(random_genomes(cfg, hidden=3, density=0.0).conn.sum()) == 0
+    full = random_genomes(cfg, hidden=3, density=1.0)
+    # 7 nodes; genes into the output and 3 hidden nodes (4 targets) from all 7 sources, per genome
+    assert full.num_genes().tolist() == [[28] * 4]
+    ff = random_genomes(NEATConfig(**{**cfg.to_dict(), "feed_forward": True}), hidden=3, density=1.0)
+    check_invariants(ff, NEATConfig(**{**cfg.to_dict(), "feed_forward": True}))
+    assert int(ff.num_genes()[0, 0]) == 3 * 4 + 3 + 2 + 1  # into the output from 6; hidden k from 3 + k earlier
+
+
+@pytest.mark.parametrize("field,value", [("runs", 0), ("hidden", 4), ("density", 1.5), ("hidden", True)])
+def test_random_genomes_reject_bad_arguments_by_name(field, value):
+    cfg = NEATConfig(num_inputs=2, num_outputs=1, max_hidden=3, pop_size=4)
+    with pytest.raises(ValueError, match=f"random_genomes: {field} = "):
+        random_genomes(cfg, **{field: value})
+
+
+# --- item 5: fresh start states per generation ------------------------------------------------------
+
+def _starts_of(fitness_fn, genomes):
+    """The first observation of each row, as the rollout saw it."""
+    controller = make_controller(genomes, fitness_fn.config, fitness_fn.task, fitness_fn.spec)
+    starts = fresh_starts(fitness_fn.task, genomes, fitness_fn.episodes, fitness_fn.seed)
+    return rollout(fitness_fn.task, controller, episodes=fitness_fn.episodes, starts=starts, max_steps=1,
+                   record=True).trace["observation"][0]
+
+
+def test_fresh_starts_change_each_generation_and_belong_to_the_run():
+    task = PointMass()
+    cfg = task_config(task, "sigmoid", pop_size=6)
+    fitness = TaskFitness(task, cfg, "sigmoid", episodes=3, seed=5, fresh_starts=True)
+    neat = NEAT(cfg, seeds=[0, 1, 2])
+    first = neat.ask()
+    neat.tell(fitness(first))
+    second = neat.ask()
+    s1, s2 = _starts_of(fitness, first), _starts_of(fitness, second)
+    rows = s1.view(3, 6, 3, 2)
+    # every genome of a run shares its run's starts; runs and generations differ
+    assert torch.equal(rows, rows[:, :1].expand_as(rows))
+    assert not torch.equal(rows[0, 0], rows[1, 0]) and not torch.equal(s1, s2)
+    # a run's starts (and so its fitness) do not depend on the other runs beside it
+    alone = fitness(second.select_runs([1]))
+    assert torch.equal(alone[0], fitness(second)[1])
+    assert torch.equal(_starts_of(fitness, second.select_runs([2])), s2.view(3, 18, 2)[2])
+    # the seed matters
+    other = TaskFitness(task, cfg, "sigmoid", episodes=3, seed=6, fresh_starts=True)
+    assert not torch.equal(_starts_of(other, second), s2)
+
+
+def test_fixed_starts_stay_the_default_and_fresh_starts_exclude_them():
+    task = PointMass()
+    cfg = task_config(task, "sigmoid", pop_size=6)
+    fixed = TaskFitness(task, cfg, "sigmoid", episodes=3, seed=5)
+    neat = NEAT(cfg, seeds=[0])
+    g1 = neat.ask()
+    neat.tell(fixed(g1))
+    g2 = neat.ask()
+    controller = make_controller(g2, cfg, task)
+    first = rollout(task, controller, episodes=3, seed=5, max_steps=1, record=True).trace["observation"][0]
+    assert torch.equal(first.view(6, 3, 2), first.view(6, 3, 2)[:1].expand(6, 3, 2))
+    with pytest.raises(ValueError, match="fixed starts= or fresh_starts=True, not both"):
+        TaskFitness(task, cfg, "sigmoid", starts=torch.zeros(3, 2), fresh_starts=True)
+
+
+def test_a_run_with_fresh_starts_resumes_to_the_same_bits():
+    task = PointMass()
+    cfg = task_config(task, pop_size=12)
+    fitness = TaskFitness(task, cfg, "snn", episodes=2, seed=1, fresh_starts=True, max_steps=30)
+    straight = NEAT(cfg, seeds=[3, 4])
+    straight.run(fitness, generations=4)
+    first = NEAT(cfg, seeds=[3, 4])
+    first.run(fitness, generations=2)
+    resumed = NEAT.from_state_dict(first.state_dict())
+    resumed.run(fitness, generations=2)
+    assert torch.equal(resumed.best_fitness, straight.best_fitness)
+    assert all(torch.equal(a, b) for a, b in zip(resumed.ask().tensors().values(), straight.ask().tensors().values(),
+                                                 strict=True))
+
+
+def test_per_row_starts_are_checked_like_shared_ones():
+    task = PointMass()
+    cfg = task_config(task, "sigmoid", pop_size=4)
+    genomes = NEAT(cfg, seeds=[0]).ask()
+    controller = make_controller(genomes, cfg, task)
+    starts = fresh_starts(task, genomes, 2, 0)
+    starts[5, 0] = float("nan")
+    with pytest.raises(Exception, match=r"NaN or inf at 1 of 8 start\(s\), first: \(genome 2, episode 1\)"):
+        rollout(task, controller, episodes=2, starts=starts)
+    with pytest.raises(Exception, match=r"start states have 5 rows, expected 2 \(one per episode"):
+        rollout(task, controller, episodes=2, starts=torch.zeros(5, 2))
+
+
+# --- the docs' example, as a user copies it -----------------------------------------------------------
+
+def _doc_blocks(language: str) -> list[str]:
+    text = (Path(__file__).resolve().parents[2] / "docs" / "writing-a-task.md").read_text()
+    return [textwrap.dedent(b.split("```")[0]) for b in text.split("```" + language + "\n")[1:]]
+
+
+def test_the_docs_pendulum_example_evolves_and_its_random_genomes_run():
+    """docs/writing-a-task.md's first example (fewer runs and generations) and its random genomes."""
+    blocks = _doc_blocks("python")
+    example = next(b for b in blocks if "class Pendulum(Task)" in b)
+    small = example.replace("seeds=range(8)", "seeds=range(2)").replace("generations=50", "generations=2")
+    assert small.count("range(2)") == 1 and "generations=2" in small
+    namespace: dict = {}
+    exec(small, namespace)
+    assert namespace["fitness"].kind == "snn" and namespace["fitness"].fresh_starts
+    assert namespace["result"].best_fitness.shape == (2,)
+    assert namespace["trace"]["action"].shape[1:] == (2, 1)
+    exec(next(b for b in blocks if "random_genomes(" in b), namespace)
+    assert namespace["steps"].shape == (64, 2) and int(namespace["steps"].min()) >= 1
