@@ -27,6 +27,7 @@ import torch
 from torch import Tensor
 
 from evolution.ablation import StaticMapController
+from evolution.input_coding import CODING_CODES, coding_constants, input_coding_of
 from evolution.native_plant import native_plant
 from evolution.phenotype import DECODER_CODES, SigmoidController, SpikingController, kernel_constants
 from evolution.task import Task, TaskError
@@ -83,16 +84,16 @@ def native_rollout(task: Task, controller, starts, *, episodes: int, max_steps: 
     if plant is None or not plant.accepts(starts) or not _controller_supported(controller):
         return None
     dtype = controller.weight.dtype
-    low, high = task.bounds(dtype=dtype)
-    span = (high - low).contiguous()
+    coding, clip = input_coding_of(controller)
+    offset, scale = (t.contiguous() for t in coding_constants(*task.bounds(dtype=dtype), coding))
     starts = starts.contiguous()
     returns = torch.zeros(B, dtype=torch.float64)
     steps = torch.zeros(B, dtype=torch.int64)
     error = torch.zeros(3, dtype=torch.int64)
     suffix = "f32" if dtype == torch.float32 else "f64"
     common = (plant.step_ptr, plant.observe_ptr, plant.params.data_ptr(), starts.element_size(), plant.width,
-              starts.data_ptr(), starts.shape[0], episodes, task.observation_size, task.action_size, max_steps, low.data_ptr(),
-              span.data_ptr())
+              starts.data_ptr(), starts.shape[0], episodes, task.observation_size, task.action_size, max_steps,
+              offset.data_ptr(), scale.data_ptr(), CODING_CODES[coding], int(clip), controller.n_in)
     outputs = (B, returns.data_ptr(), steps.data_ptr(), error.data_ptr(), torch.get_num_threads())
     if isinstance(controller, SpikingController):
         spec, net = controller.spec, controller.network

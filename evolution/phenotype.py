@@ -29,6 +29,7 @@ import torch
 from torch import Tensor, nn
 
 from evolution.config import NEATConfig
+from evolution.input_coding import check_coding, inputs_per_observation
 from evolution.population import Genomes
 from snn_torch.functional.counter_rng import fnv1a_keys
 from snn_torch.functional.decode import ordered_matvec
@@ -58,7 +59,7 @@ from snn_torch.modules.recurrent import PopulationRecurrentIzhikevich, Populatio
 __all__ = ["SpikingSpec", "SigmoidSpec", "SpikingController", "SigmoidController", "SpikingState",
            "SigmoidState", "rest_rate_hz", "used_slots", "local_slots", "NEAT_SIGMOID_SLOPE", "ENCODERS", "SPIKING_DECODERS",
            "SIGMOID_DECODERS", "make_controller", "spiking_config", "SPIKING_SIGMA", "sigmoid_config", "task_config",
-           "controller_kind", "check_controller_config", "CONTROLLER_KINDS"]
+           "controller_kind", "check_controller_config", "CONTROLLER_KINDS", "network_inputs"]
 
 NEAT_SIGMOID_SLOPE = 4.9  # [NEAT02]
 ENCODERS = ("current", "bernoulli")
@@ -99,6 +100,11 @@ class SpikingSpec:
         rest_relative: rates relative to each node's rate at rest (inputs: at the middle of
             their range; neurons: under the background current alone, ``rest_rate_hz``).
         threshold: the bang-bang decoder's threshold on the drive.
+        input_coding: how observations become inputs (``evolution.input_coding``): ``"unit"``
+            ([0, 1] over the task's bounds, the paper's), ``"signed"`` ([-1, 1] about the
+            middle: a current below the background's under the middle; not with the Bernoulli
+            encoder) or ``"push_pull"`` (two input nodes per variable, the positive and the
+            negative part of the signed value); ``clip_inputs``: clip the signed value to [-1, 1].
     """
 
     neuron: IzhikevichParams = QIU2019
@@ -112,8 +118,14 @@ class SpikingSpec:
     rate_window_steps: int = 4
     rest_relative: bool = False
     threshold: float = 0.0
+    input_coding: str = "unit"
+    clip_inputs: bool = True
 
     def __post_init__(self) -> None:
+        check_coding("SpikingSpec", self.input_coding, self.clip_inputs)
+        if self.encoder == "bernoulli" and self.input_coding == "signed":
+            raise ValueError("SpikingSpec.input_coding='signed' cannot drive the Bernoulli encoder (a spike "
+                             "probability is not negative): use 'push_pull'")
         check_dt(self.dt_ms)
         check_params(self.neuron)
         for name in ("i_background", "i_input_max", "input_rate_max_hz", "synapse_kick_mv", "threshold"):
@@ -145,13 +157,18 @@ class SpikingSpec:
 class SigmoidSpec:
     """A sigmoid controller's choices: ``updates_per_step`` network updates per control step
     (NEAT pole balancing: 1) and the decoder of the outputs ``y`` in (0, 1):
-    ``"sigmoid_force"``: ``a = a_max (2 y - 1)``; ``"bang_bang"``: ``a = +-a_max`` on ``y > 0.5``."""
+    ``"sigmoid_force"``: ``a = a_max (2 y - 1)``; ``"bang_bang"``: ``a = +-a_max`` on ``y > 0.5``.
+    ``input_coding`` and ``clip_inputs``: the input nodes' values (``evolution.input_coding``:
+    ``"unit"`` [0, 1], ``"signed"`` [-1, 1], ``"push_pull"`` two nodes per variable)."""
 
     updates_per_step: int = 1
     decoder: str = "sigmoid_force"
     slope: float = NEAT_SIGMOID_SLOPE
+    input_coding: str = "unit"
+    clip_inputs: bool = True
 
     def __post_init__(self) -> None:
+        check_coding("SigmoidSpec", self.input_coding, self.clip_inputs)
         if isinstance(self.updates_per_step, bool) or not isinstance(self.updates_per_step, int) \
                 or self.updates_per_step < 1:
             raise ValueError(f"SigmoidSpec.updates_per_step must be an int >= 1, got {self.updates_per_step!r}")
@@ -215,20 +232,30 @@ def task_config(task, kind: str | SpikingSpec | SigmoidSpec = "snn", **overrides
     """A ``NEATConfig`` for a controller of ``kind`` (``"snn"``, ``"sigmoid"``, or a spec) on
     ``task`` (an ``evolution.Task``): its inputs and outputs from the task's observations and
     actions, then ``spiking_config`` or ``sigmoid_config``; ``overrides`` set any other field."""
-    kind = controller_kind(None, kind) if isinstance(kind, (SpikingSpec, SigmoidSpec)) else controller_kind(kind)
+    spec = kind if isinstance(kind, (SpikingSpec, SigmoidSpec)) else None
+    kind = controller_kind(None, spec) if spec is not None else controller_kind(kind)
     make = spiking_config if kind == "snn" else sigmoid_config
-    return make(task.observation_size, task.action_size, **overrides)
+    return make(network_inputs(task, spec), task.action_size, **overrides)
 
 
-def check_controller_config(config: NEATConfig, kind: str, task) -> None:
-    """``ValueError`` naming the field where ``config`` cannot serve a ``kind`` controller on
-    ``task``: inputs and outputs other than the task's observations and actions, or, for sigmoid
-    NEAT, a decoder gain sigma that varies and counts in the compatibility distance (a sigmoid
-    controller has no gain, so it would split species over a gene with no effect)."""
-    if config.num_inputs != task.observation_size or config.num_outputs != task.action_size:
-        raise ValueError(f"task {task.name!r} has {task.observation_size} observations and {task.action_size} "
-                         f"actions, but the config has num_inputs={config.num_inputs} and "
-                         f"num_outputs={config.num_outputs} (task_config(task, kind) makes a matching one)")
+def network_inputs(task, spec: SpikingSpec | SigmoidSpec | None) -> int:
+    """Input nodes a controller with ``spec`` needs for ``task``'s observations (two per variable
+    under the push-pull coding)."""
+    return task.observation_size * inputs_per_observation(getattr(spec, "input_coding", "unit"))
+
+
+def check_controller_config(config: NEATConfig, kind: str, task, spec: SpikingSpec | SigmoidSpec | None = None) -> None:
+    """``ValueError`` naming the field where ``config`` cannot serve a ``kind`` controller with
+    ``spec`` on ``task``: inputs and outputs other than the task's observations (as the spec
+    codes them) and actions, or, for sigmoid NEAT, a decoder gain sigma that varies and counts
+    in the compatibility distance (a sigmoid controller has no gain, so it would split species
+    over a gene with no effect)."""
+    inputs = network_inputs(task, spec)
+    if config.num_inputs != inputs or config.num_outputs != task.action_size:
+        coded = "" if inputs == task.observation_size else f" (coded as {inputs} inputs)"
+        raise ValueError(f"task {task.name!r} has {task.observation_size} observations{coded} and "
+                         f"{task.action_size} actions, but the config has num_inputs={config.num_inputs} and "
+                         f"num_outputs={config.num_outputs} (task_config(task, spec) makes a matching one)")
     sigma_varies = config.sigma_mutate_rate > 0 or config.sigma_init_stdev > 0
     if kind == "sigmoid" and sigma_varies and config.compatibility_sigma_coefficient > 0:
         raise ValueError(f"config.compatibility_sigma_coefficient = {config.compatibility_sigma_coefficient:g} "
@@ -244,10 +271,13 @@ def used_slots(genomes: Genomes) -> Tensor:
     return torch.nonzero(genomes.node.reshape(-1, N).any(0)).flatten()
 
 
-def _check_layout(config: NEATConfig, genomes: Genomes, observation_size: int, action_size: int) -> None:
-    if config.num_inputs != observation_size or config.num_outputs != action_size:
-        raise ValueError(f"the task has {observation_size} observations and {action_size} actions, but the config "
-                         f"has num_inputs={config.num_inputs} and num_outputs={config.num_outputs}")
+def _check_layout(config: NEATConfig, genomes: Genomes, observation_size: int, action_size: int,
+                  coding: str = "unit") -> None:
+    inputs = observation_size * inputs_per_observation(coding)
+    if config.num_inputs != inputs or config.num_outputs != action_size:
+        coded = "" if inputs == observation_size else f" (coded {coding!r}: {inputs} inputs)"
+        raise ValueError(f"the task has {observation_size} observations{coded} and {action_size} actions, but the "
+                         f"config has num_inputs={config.num_inputs} and num_outputs={config.num_outputs}")
     if genomes.num_nodes != config.num_nodes:
         raise ValueError(f"genomes have {genomes.num_nodes} node slots, the config {config.num_nodes}")
 
@@ -272,9 +302,10 @@ class _Phenotype(nn.Module):
     same order as over its slots (and exact zeros for the rest), so results do not depend on it.
     """
 
-    def __init__(self, genomes: Genomes, config: NEATConfig, observation_size: int, action_size: int) -> None:
+    def __init__(self, genomes: Genomes, config: NEATConfig, observation_size: int, action_size: int,
+                 coding: str = "unit") -> None:
         super().__init__()
-        _check_layout(config, genomes, observation_size, action_size)
+        _check_layout(config, genomes, observation_size, action_size, coding)
         N = genomes.num_nodes
         self.config = config
         self.num_genomes = genomes.num_runs * genomes.pop_size
@@ -328,8 +359,9 @@ class SpikingController(_Phenotype):
 
     def __init__(self, genomes: Genomes, config: NEATConfig, spec: SpikingSpec | None = None, *, period_s: float,
                  action_max: float, observation_size: int, action_size: int = 1, backend: str = "auto") -> None:
-        super().__init__(genomes, config, observation_size, action_size)
-        self.spec = spec = SpikingSpec() if spec is None else spec
+        spec = SpikingSpec() if spec is None else spec
+        super().__init__(genomes, config, observation_size, action_size, spec.input_coding)
+        self.spec = spec
         self.substeps = spec.substeps(period_s)
         self.network = PopulationRecurrentIzhikevich(
             self.weight, self.mask, spec.neuron, i_background=spec.i_background, synapse_kick_mv=spec.synapse_kick_mv,
@@ -349,8 +381,9 @@ class SpikingController(_Phenotype):
         self.rest = None
         if spec.rest_relative:
             rest = torch.full((n,), rest_rate_hz(spec.neuron, spec.i_background, spec.dt_ms), dtype=torch.float64)
-            rest[: self.n_in] = (0.5 * spec.input_rate_max_hz if spec.encoder == "bernoulli"
-                                 else rest_rate_hz(spec.neuron, spec.i_background + 0.5 * spec.i_input_max, spec.dt_ms))
+            middle = 0.5 if spec.input_coding == "unit" else 0.0  # the input at the middle of the range
+            rest[: self.n_in] = (middle * spec.input_rate_max_hz if spec.encoder == "bernoulli" else
+                                 rest_rate_hz(spec.neuron, spec.i_background + middle * spec.i_input_max, spec.dt_ms))
             self.rest = rest.to(device=self.weight.device, dtype=self.weight.dtype)  # [n]
         self.action_max = float(action_max)
         if spec.decoder == "sigmoid_force":
@@ -499,8 +532,9 @@ class SigmoidController(_Phenotype):
     def __init__(self, genomes: Genomes, config: NEATConfig, spec: SigmoidSpec | None = None, *, action_max: float,
                  observation_size: int, action_size: int = 1, period_s: float | None = None,
                  backend: str = "auto") -> None:
-        super().__init__(genomes, config, observation_size, action_size)
-        self.spec = spec = SigmoidSpec() if spec is None else spec
+        spec = SigmoidSpec() if spec is None else spec
+        super().__init__(genomes, config, observation_size, action_size, spec.input_coding)
+        self.spec = spec
         self.network = PopulationRecurrentSigmoid(self.weight, self.mask, num_clamped=self.n_in, num_bias=self.n_bias,
                                                   slope=spec.slope, backend="auto" if backend == "compiled" else backend)
         self.action_max = float(action_max)

@@ -2,8 +2,8 @@
 
 ``rollout(task, controller)`` runs each of the controller's ``G = R * P`` genomes for
 ``episodes`` episodes (row ``g * episodes + e``), one control step of the whole batch at a
-time: observe, normalise to [0, 1] over the task's bounds, act (network state carried across
-control steps), step the plant. A row that terminates stops counting and its plant state is
+time: observe, code as the controller's inputs (``evolution.input_coding``: by default [0, 1]
+over the task's bounds), act (network state carried across control steps), step the plant. A row that terminates stops counting and its plant state is
 frozen; when fewer than ``compact_below`` of the rows still in the batch are alive, the
 finished ones are dropped (plant and controller state), so they stop costing compute. No
 Python loop over genomes, episodes or neurons. Where the task has a native step and the
@@ -30,6 +30,7 @@ from torch import Tensor
 
 from evolution.config import NEATConfig
 from evolution.episodes import native_rollout
+from evolution.input_coding import code_observations, coding_constants, input_coding_of
 from evolution.native_plant import native_plant
 from evolution.phenotype import (
     SigmoidSpec,
@@ -204,9 +205,9 @@ def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=
         plant = None
     observe, step = (task.observe, task.step) if plant is None else (plant.observe, plant.step)
     cstate = controller.initial_state(torch.div(rows, episodes, rounding_mode="floor"))
-    low, high = task.bounds(device=device, dtype=dtype)
-    span = high - low
-    zero, one, zero64 = scalar(0.0, low), scalar(1.0, low), scalar(0.0, low.to(torch.float64))
+    coding, clip = input_coding_of(controller)
+    offset, scale = coding_constants(*task.bounds(device=device, dtype=dtype), coding)
+    zero64 = scalar(0.0, offset.to(torch.float64))
     n_obs = task.observation_size
     returns = torch.zeros(B, dtype=torch.float64, device=device)
     steps = torch.zeros(B, dtype=torch.int64, device=device)
@@ -217,9 +218,8 @@ def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=
     for _ in range(max_steps):
         obs = observe(state)
         _check_batch(task, "observe()", "observation", obs, n_rows, (n_obs,))
-        obs01 = ((obs if obs.dtype == dtype else obs.to(dtype)) - low) / span
-        obs01 = torch.clamp(obs01, zero, one)
-        action, cstate, activity = controller.act(obs01, cstate)
+        inputs = code_observations(obs if obs.dtype == dtype else obs.to(dtype), offset, scale, coding, clip)
+        action, cstate, activity = controller.act(inputs, cstate)
         new_state, reward, terminated = step(state, action)
         _check_batch(task, "step()", "reward", reward, n_rows, ())
         _check_batch(task, "step()", "terminated", terminated, n_rows, ())
@@ -305,7 +305,7 @@ class TaskFitness:
                  max_steps: int | None = None, backend: str = "auto", fresh_starts: bool = False) -> None:
         self.task, self.config, self.spec = task.validate(), config, spec
         self.kind = controller_kind(kind, spec)
-        check_controller_config(config, self.kind, task)
+        check_controller_config(config, self.kind, task, spec)
         if fresh_starts and starts is not None:
             raise ValueError("TaskFitness takes fixed starts= or fresh_starts=True, not both")
         self.episodes, self.seed, self.starts, self.max_steps, self.backend = episodes, seed, starts, max_steps, backend

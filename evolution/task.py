@@ -4,7 +4,8 @@ A task is what EvoTorch's ``Problem`` is to EvoTorch: write one and NEAT, weight
 plots and checkpoints work on it. Subclass ``Task`` and give:
 
 - ``observation_low`` / ``observation_high``: bounds of each observed variable (its own units);
-  controllers normalise observations to [0, 1] over them (values beyond saturate).
+  controllers code observations over them (``evolution.input_coding``: [0, 1] by default,
+  values beyond saturate; or signed, about the middle of the range).
 - ``action_size`` and ``action_max``: actions are ``[B, action_size]`` in
   ``[-action_max, action_max]`` (the controllers' decoders scale to it).
 - ``max_steps``: the episode length (control steps); ``control_period_s``: the time one control

@@ -7,8 +7,9 @@
    plant_bytes 4 or 8 per element), plant_params, width (state columns), starts [start_rows][width]
    (row r starts from starts[r % start_rows] and runs network r / episodes; start_rows is
    episodes for starts shared by every network, or rows for a start per row), n_obs observations,
-   n_act actions, max_steps control steps at most. Normalisation: x01 = clamp((T(obs) - low) /
-   span, 0, 1), as the rollout computes it. Outputs: returns[r] (sum of the rewards, double, in
+   n_act actions, max_steps control steps at most. Input coding (evolution.input_coding, as the
+   rollout computes it): v = (T(obs) - offset) / scale; coding 0: clamp(v, 0, 1); 1: v, clamped
+   to [-1, 1] if clip; 2: the same v as the pair (max(v, 0), max(-v, 0)); n_in network inputs. Outputs: returns[r] (sum of the rewards, double, in
    step order) and steps[r] (control steps before the episode terminated, or max_steps). Rows
    run on `threads` threads, each taking the next row when one of its rows finishes: no thread
    waits for another until the end. Returns 0, or on the first bad row 1 (an observation NaN or
@@ -28,7 +29,7 @@
    the observation, the last one's action. */
 int64_t episodes_spiking_f32(const void *step_fn, const void *observe_fn, const double *plant_params,
                              int64_t plant_bytes, int64_t width, const void *starts, int64_t start_rows, int64_t episodes,
-                             int64_t n_obs, int64_t n_act, int64_t max_steps, const float *low, const float *span,
+                             int64_t n_obs, int64_t n_act, int64_t max_steps, const float *offset, const float *scale, int64_t coding, int64_t clip, int64_t n_in,
                              const float *w, const float *v0, const float *u0, const float *z0, int64_t n,
                              const float *iconst, float gain, const int64_t *keys, const float *w_out,
                              const float *rest, const float *sigma, int64_t window, double period_s,
@@ -37,8 +38,8 @@ int64_t episodes_spiking_f32(const void *step_fn, const void *observe_fn, const 
                              double *returns, int64_t *steps, int64_t *error, int threads);
 int64_t episodes_spiking_f64(const void *step_fn, const void *observe_fn, const double *plant_params,
                              int64_t plant_bytes, int64_t width, const void *starts, int64_t start_rows, int64_t episodes,
-                             int64_t n_obs, int64_t n_act, int64_t max_steps, const double *low,
-                             const double *span, const double *w, const double *v0, const double *u0,
+                             int64_t n_obs, int64_t n_act, int64_t max_steps, const double *offset,
+                             const double *scale, int64_t coding, int64_t clip, int64_t n_in, const double *w, const double *v0, const double *u0,
                              const double *z0, int64_t n, const double *iconst, double gain, const int64_t *keys,
                              const double *w_out, const double *rest, const double *sigma, int64_t window,
                              double period_s, int64_t substeps, double dt, double a, double b, double c, double d,
@@ -51,14 +52,14 @@ int64_t episodes_spiking_f64(const void *step_fn, const void *observe_fn, const 
    actions read from nodes first_output.. by decoder 0 (a_max (2 y - 1)) or 1 (+-a_max on y > 0.5). */
 int64_t episodes_sigmoid_f32(const void *step_fn, const void *observe_fn, const double *plant_params,
                              int64_t plant_bytes, int64_t width, const void *starts, int64_t start_rows, int64_t episodes,
-                             int64_t n_obs, int64_t n_act, int64_t max_steps, const float *low, const float *span,
+                             int64_t n_obs, int64_t n_act, int64_t max_steps, const float *offset, const float *scale, int64_t coding, int64_t clip, int64_t n_in,
                              const float *w, int64_t n, int64_t n_bias, float slope, int64_t updates,
                              int64_t first_output, int64_t decoder, double action_max, int64_t settle,
                              int64_t rows, double *returns, int64_t *steps, int64_t *error, int threads);
 int64_t episodes_sigmoid_f64(const void *step_fn, const void *observe_fn, const double *plant_params,
                              int64_t plant_bytes, int64_t width, const void *starts, int64_t start_rows, int64_t episodes,
-                             int64_t n_obs, int64_t n_act, int64_t max_steps, const double *low,
-                             const double *span, const double *w, int64_t n, int64_t n_bias, double slope,
+                             int64_t n_obs, int64_t n_act, int64_t max_steps, const double *offset,
+                             const double *scale, int64_t coding, int64_t clip, int64_t n_in, const double *w, int64_t n, int64_t n_bias, double slope,
                              int64_t updates, int64_t first_output, int64_t decoder, double action_max,
                              int64_t settle, int64_t rows, double *returns, int64_t *steps, int64_t *error,
                              int threads);

@@ -12,7 +12,8 @@ typedef struct {
     const double *params;
     const unsigned char *starts;
     int64_t row_bytes, width, start_rows, episodes, n_obs, n_act, max_steps, rows;
-    const T *low, *span;
+    const T *offset, *scale; /* input coding (evolution.input_coding): x = (T(obs) - offset) / scale */
+    int64_t coding, clip, n_in; /* coding 0 unit, 1 signed, 2 push-pull; n_in network inputs */
     double *returns;
     int64_t *steps;
 } FN(plant_t_);
@@ -53,15 +54,27 @@ static void FN(lanes_move_)(FN(lanes_t_) *L, const FN(plant_t_) *p, int64_t from
     L->ret[to] = L->ret[from];
 }
 
-/* Observe and normalise rows [0, lanes); 0, or the lane whose observation is not finite plus 1. */
+/* Observe and code rows [0, lanes) as evolution.input_coding.code_observations does; 0, or the
+   lane whose observation is not finite plus 1. */
 static int64_t FN(lanes_observe_)(FN(lanes_t_) *L, const FN(plant_t_) *p, int64_t lanes) {
     p->observe(L->state, L->obs, lanes, p->params);
     for (int64_t k = 0; k < lanes; ++k)
         for (int64_t j = 0; j < p->n_obs; ++j) {
             const double o = L->obs[k * p->n_obs + j];
             if (!isfinite(o)) return k + 1;
-            const T v = ((T)o - p->low[j]) / p->span[j];
-            L->x[k * MAXN + j] = v < (T)0 ? (T)0 : (v > (T)1 ? (T)1 : v);
+            T v = ((T)o - p->offset[j]) / p->scale[j];
+            T *x = L->x + k * MAXN;
+            if (p->coding == 0) {
+                x[j] = v < (T)0 ? (T)0 : (v > (T)1 ? (T)1 : v);
+                continue;
+            }
+            if (p->clip) v = v < (T)-1 ? (T)-1 : (v > (T)1 ? (T)1 : v);
+            if (p->coding == 1) {
+                x[j] = v;
+            } else {
+                x[2 * j] = v > (T)0 ? v : (T)0;
+                x[2 * j + 1] = v < (T)0 ? -v : (T)0;
+            }
         }
     return 0;
 }
@@ -159,7 +172,7 @@ static void FN(spiking_move_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, 
    actions into L->act. */
 static void FN(spiking_step_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, const FN(plant_t_) *p,
                               FN(lanes_t_) *L, int64_t lanes, const int64_t *tt) {
-    const int64_t n = c->n, np = c->np, n_x = p->n_obs, K = p->n_act, M = c->substeps * n_x;
+    const int64_t n = c->n, np = c->np, n_x = p->n_in, K = p->n_act, M = c->substeps * n_x;
     const int bern = c->keys != NULL;
     const int64_t n_src = bern ? n_x : 0;
     const T gain = c->gain, dt = c->dt, a = c->a, b = c->b, cc = c->c, d = c->d, vpeak = c->vpeak;
@@ -259,7 +272,7 @@ static void FN(sigmoid_act_)(T *values, const FN(sigmoid_t_) *c, const FN(plant_
     for (int64_t k = 0; k < lanes; ++k) {
         T *y = c->settle ? values + LANES * n : values + k * n;
         if (c->settle) memset(y, 0, (size_t)n * sizeof(T));
-        SIGMOID_ROW(y, L->x + k * MAXN, c->w + (L->row[k] / p->episodes) * n * n, n, p->n_obs, c->n_bias, c->slope,
+        SIGMOID_ROW(y, L->x + k * MAXN, c->w + (L->row[k] / p->episodes) * n * n, n, p->n_in, c->n_bias, c->slope,
                     updates, yc, acc);
         const T amax = (T)c->action_max;
         for (int64_t o = 0; o < K; ++o) {
@@ -309,7 +322,8 @@ static void FN(fail_)(int64_t *error, int64_t kind, int64_t row, int64_t code) {
 
 int64_t FN(episodes_spiking_)(const void *step_fn, const void *observe_fn, const double *plant_params,
                               int64_t plant_bytes, int64_t width, const void *starts, int64_t start_rows, int64_t episodes,
-                              int64_t n_obs, int64_t n_act, int64_t max_steps, const T *low, const T *span,
+                              int64_t n_obs, int64_t n_act, int64_t max_steps, const T *offset, const T *scale,
+                              int64_t coding, int64_t clip, int64_t n_in,
                               const T *w, const T *v0, const T *u0, const T *z0, int64_t n, const T *iconst, T gain,
                               const int64_t *keys, const T *w_out, const T *rest, const T *sigma, int64_t window,
                               double period_s, int64_t substeps, T dt, T a, T b, T c, T d, T vpeak,
@@ -317,7 +331,7 @@ int64_t FN(episodes_spiking_)(const void *step_fn, const void *observe_fn, const
                               double *returns, int64_t *steps, int64_t *error, int threads) {
     const FN(plant_t_) plant = {(native_step_fn)step_fn, (native_observe_fn)observe_fn, plant_params,
                                 (const unsigned char *)starts, width * plant_bytes, width, start_rows, episodes, n_obs, n_act,
-                                max_steps, rows, low, span, returns, steps};
+                                max_steps, rows, offset, scale, coding, clip, n_in, returns, steps};
     const FN(spiking_t_) ctrl = {w, v0, u0, z0, iconst, w_out, rest, sigma, keys, n, padded_size(n), window, substeps,
                                  decoder, settle, gain, dt, a, b, c, d, vpeak, period_s, action_max, threshold};
     const FN(plant_t_) *p = &plant;
@@ -332,8 +346,8 @@ int64_t FN(episodes_spiking_)(const void *step_fn, const void *observe_fn, const
         if (ok) {
             S->wbuf = (T *)calloc((size_t)(LANES * np * np), sizeof(T));
             S->hist = (T *)calloc((size_t)(LANES * window * np), sizeof(T));
-            S->draws = (unsigned char *)malloc((size_t)(LANES * (substeps * n_obs > 0 ? substeps * n_obs : 1)));
-            S->prob = (double *)malloc((size_t)(substeps * n_obs > 0 ? substeps * n_obs : 1) * sizeof(double));
+            S->draws = (unsigned char *)malloc((size_t)(LANES * (substeps * n_in > 0 ? substeps * n_in : 1)));
+            S->prob = (double *)malloc((size_t)(substeps * n_in > 0 ? substeps * n_in : 1) * sizeof(double));
             ok = S->wbuf && S->hist && S->draws && S->prob;
         }
         if (!ok) FN(fail_)(error, 4, -1, 0);
@@ -368,13 +382,14 @@ int64_t FN(episodes_spiking_)(const void *step_fn, const void *observe_fn, const
 
 int64_t FN(episodes_sigmoid_)(const void *step_fn, const void *observe_fn, const double *plant_params,
                               int64_t plant_bytes, int64_t width, const void *starts, int64_t start_rows, int64_t episodes,
-                              int64_t n_obs, int64_t n_act, int64_t max_steps, const T *low, const T *span,
+                              int64_t n_obs, int64_t n_act, int64_t max_steps, const T *offset, const T *scale,
+                              int64_t coding, int64_t clip, int64_t n_in,
                               const T *w, int64_t n, int64_t n_bias, T slope, int64_t updates, int64_t first_output,
                               int64_t decoder, double action_max, int64_t settle, int64_t rows, double *returns,
                               int64_t *steps, int64_t *error, int threads) {
     const FN(plant_t_) plant = {(native_step_fn)step_fn, (native_observe_fn)observe_fn, plant_params,
                                 (const unsigned char *)starts, width * plant_bytes, width, start_rows, episodes, n_obs, n_act,
-                                max_steps, rows, low, span, returns, steps};
+                                max_steps, rows, offset, scale, coding, clip, n_in, returns, steps};
     const FN(sigmoid_t_) ctrl = {w, n, n_bias, updates, first_output, decoder, settle, slope, action_max};
     const FN(plant_t_) *p = &plant;
     int64_t next_row = 0;
