@@ -170,16 +170,11 @@ def _configs(args: argparse.Namespace) -> list:
         from tasks.xor import XOR_CONFIG
 
         return [XOR_CONFIG]
-    from tasks.experiments import cartpole as cp
+    from tasks.experiments.reproduce import study_config
 
     table = args.table if args.command == "reproduce" else ("table1" if args.task == "markov" else "table2")
-    make = cp.markov_config if table == "table1" else cp.controller_config
     controllers = args.controllers if args.command == "reproduce" else [args.controller]
-    out = []
-    for c in controllers:
-        preset, extra = cp.ga_choice(table, c, args.ga)
-        out.append(make(c, self_loops=args.self_loops, ga=preset, **extra))
-    return out
+    return [study_config(table, c, self_loops=args.self_loops, ga=args.ga) for c in controllers]
 
 
 def _prepare(args: argparse.Namespace) -> list[int]:

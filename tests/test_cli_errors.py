@@ -281,3 +281,17 @@ def test_running_out_of_memory_is_one_line(error, capsys, tmp_path, monkeypatch)
 
     monkeypatch.setattr(xor_mod, "run_xor", exhausted)
     _one_line_error(capsys, [*XOR, "--out", str(tmp_path)], "out of memory: use fewer --runs")
+
+
+@pytest.mark.parametrize("table, controller", [("dpnv", "snn"), ("dpnv", "sigmoid"), ("dpv", "sigmoid"),
+                                               ("table1", "snn"), ("table2", "sigmoid")])
+def test_the_memory_check_sizes_the_configs_the_study_evolves(table, controller):
+    """The check reads the config run_controller evolves: DPNV's population of 1000, not Table II's 150."""
+    from tasks.cli import _configs, build_parser
+    from tasks.experiments.reproduce import study_config
+
+    args = build_parser().parse_args(["reproduce", table, "--controllers", controller])
+    [config] = _configs(args)
+    assert config == study_config(table, controller)
+    assert config.pop_size == {"dpnv": 1000}.get(table, 150)
+    assert config.num_inputs == {"dpnv": 3, "dpv": 6, "table1": 4, "table2": 2}[table]

@@ -131,6 +131,21 @@ def _progress(total: int, initial: int, desc: str, enabled: bool):
     return tqdm(total=total, initial=initial, desc=desc, unit="gen", disable=not enabled, file=sys.stderr)
 
 
+def study_config(task_name: str, controller: str, *, self_loops: bool = False, ga: str = "tuned") -> NEATConfig:
+    """The NEAT config ``run_controller`` evolves ``controller`` with on ``task_name`` (the CLI's
+    memory check reads it too)."""
+    from tasks.experiments.cartpole import ga_choice
+
+    tasks = _tasks()
+    if task_name not in tasks:
+        raise ReproduceError(f"table must be one of {TASKS}, got {task_name!r}")
+    try:
+        preset, ga_extra = ga_choice(task_name, controller, ga)
+    except ValueError as exc:
+        raise ReproduceError(str(exc)) from None
+    return tasks[task_name].config(controller, self_loops=self_loops, ga=preset, **ga_extra)
+
+
 def run_controller(task_name: str, controller: str, seeds: list[int], generations: int, out: str | os.PathLike,
                    *, resume: bool = False, self_loops: bool = False, ga: str = "tuned", checkpoint_every: int = 1,
                    device: str | torch.device = "cpu", progress: bool = True,
@@ -175,7 +190,7 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
         neat, history, wall = _resumed(path, data, device)
         config = neat.config
     else:
-        config = task.config(controller, self_loops=self_loops, ga=preset, **ga_extra)
+        config = study_config(task_name, controller, self_loops=self_loops, ga=ga)
         neat = NEAT(config, seeds=seeds, device=device)
         history, wall = [], 0.0
 
