@@ -174,7 +174,8 @@ def _configs(args: argparse.Namespace) -> list:
 
     table = args.table if args.command == "reproduce" else ("table1" if args.task == "markov" else "table2")
     controllers = args.controllers if args.command == "reproduce" else [args.controller]
-    return [study_config(table, c, self_loops=args.self_loops, ga=args.ga) for c in controllers]
+    coding = getattr(args, "coding", "study")
+    return [study_config(table, c, self_loops=args.self_loops, ga=args.ga, coding=coding) for c in controllers]
 
 
 def _prepare(args: argparse.Namespace) -> list[int]:
@@ -250,7 +251,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     command = _command_line(args)
     results = {}
     common = dict(resume=args.resume, self_loops=args.self_loops, ga=args.ga, checkpoint_every=args.checkpoint_every,
-                  device=args.device, progress=not args.quiet)
+                  device=args.device, progress=not args.quiet, coding=args.coding)
     with OutputLock(args.out, command):
         _clean(args.out)
         if args.resume and not _reproduce_checkpoints(args):
@@ -387,6 +388,10 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--ga", choices=GA_CHOICES, default="tuned",
                      help="GA settings: 'tuned' (default), each controller's own pick for the table, made on tuning "
                           "seeds; or one preset for both: neat-c++ (NEAT 2002 / NEAT C++) or neat-python (its defaults)")
+    rep.add_argument("--coding", choices=("study", "signed"), default="study",
+                     help="double-pole studies only: how observations reach the networks: 'study' (default; [0, 1] "
+                          "over the study's bounds) or 'signed' (NEAT C++ 1.2.1's: x/4.8, x_dot/2, theta/0.52, "
+                          "theta_dot/2, centred and unclipped)")
     rep.add_argument("--out", default=None, help="output folder (default: results/TABLE)")
     rep.add_argument("--resume", action="store_true", help="continue from the checkpoints in --out")
     rep.add_argument("--checkpoint-every", type=_positive_int, default=1, help="generations between checkpoints")

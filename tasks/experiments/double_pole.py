@@ -25,20 +25,27 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import replace
 
 from torch import Tensor
 
 from evolution.config import NEATConfig
-from evolution.phenotype import SPIKING_SIGMA, SigmoidSpec, SpikingSpec
+from evolution.phenotype import SPIKING_SIGMA, SigmoidSpec, SpikingSpec, network_inputs
 from evolution.population import Genomes
 from evolution.rollout import TaskFitness
 from tasks.double_pole import GENERALIZATION_PASS, LONG_BALANCE_STEPS, DoublePoleTask, champion_solves
 from tasks.experiments.cartpole import CONTROLLERS, ga_choice, ga_overrides
 
-__all__ = ["VARIANTS", "POPULATION", "OBSERVATION_BOUNDS", "PUBLISHED", "study_task", "study_spec", "study_config",
+__all__ = ["VARIANTS", "CODINGS", "NEAT121_SCALES", "POPULATION", "OBSERVATION_BOUNDS", "PUBLISHED", "study_task", "study_spec", "study_config",
            "study_fitness", "study_solved"]
 
 VARIANTS = ("dpv", "dpnv")
+# How observations reach the networks: "study": [0, 1] over OBSERVATION_BOUNDS (the study as first
+# run); "signed": NEAT C++ 1.2.1's coding, each variable over its fixed scale, centred, unclipped
+# (its cartpole2 experiment feeds x / 4.8, x_dot / 2, theta / 0.52, theta_dot / 2), signed input
+# currents for NEAT-SNN (evolution.input_coding).
+CODINGS = ("study", "signed")
+NEAT121_SCALES = {"dpv": (4.8, 2.0, 0.52, 2.0, 0.52, 2.0), "dpnv": (4.8, 0.52, 0.52)}  # m, m/s, rad, rad/s
 POPULATION = {"dpv": 150, "dpnv": 1000}  # [NEAT02]
 OBSERVATION_BOUNDS = {"dpv": (2.4, 2.0, 0.3, 2.0, 0.3, 4.0), "dpnv": (2.4, 0.3, 0.3)}  # m, m/s, rad, rad/s
 DPNV_EPISODE_STEPS = 1000  # Gruau's damping fitness is measured over 1000 steps
@@ -66,45 +73,50 @@ PUBLISHED: dict[str, list[dict]] = {
 }
 
 
-def _check(variant: str, controller: str | None = None) -> None:
+def _check(variant: str, controller: str | None = None, coding: str = "study") -> None:
     if variant not in VARIANTS:
         raise ValueError(f"variant must be one of {VARIANTS}, got {variant!r}")
+    if coding not in CODINGS:
+        raise ValueError(f"coding must be one of {CODINGS}, got {coding!r}")
     if controller is not None and controller not in CONTROLLERS:
         raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
 
 
-def study_task(variant: str) -> DoublePoleTask:
-    """The task a ``variant`` evolves on (its fitness, episode length and observation bounds)."""
-    _check(variant)
+def study_task(variant: str, coding: str = "study") -> DoublePoleTask:
+    """The task a ``variant`` evolves on (its fitness, episode length and observation bounds:
+    ``OBSERVATION_BOUNDS``, or NEAT 1.2.1's scales under the ``"signed"`` coding)."""
+    _check(variant, coding=coding)
+    bounds = (OBSERVATION_BOUNDS if coding == "study" else NEAT121_SCALES)[variant]
     if variant == "dpv":
-        return DoublePoleTask.with_velocities(max_steps=LONG_BALANCE_STEPS, observation_bounds=OBSERVATION_BOUNDS["dpv"])
+        return DoublePoleTask.with_velocities(max_steps=LONG_BALANCE_STEPS, observation_bounds=bounds)
     return DoublePoleTask.without_velocities(fitness="damping", max_steps=DPNV_EPISODE_STEPS,
-                                             observation_bounds=OBSERVATION_BOUNDS["dpnv"])
+                                             observation_bounds=bounds)
 
 
-def study_spec(variant: str, controller: str) -> SpikingSpec | SigmoidSpec:
+def study_spec(variant: str, controller: str, coding: str = "study") -> SpikingSpec | SigmoidSpec:
     """The controller's coding (continuous force in +-10 N): sigmoid NEAT's defaults (NEAT 2002's
     steepened sigmoid, one update per control step); NEAT-SNN's defaults but with rates counted
     from rest (``rest_relative``) over one control step (20 ms, ``rate_window_steps=1``). Picked
     on tuning seeds 5000-5009 (docs/beyond-the-paper.md): without ``rest_relative`` no DPV run
     solved in 40 generations; with it, a window of 4 steps solved 4/10 by generation 40 and a
     window of 1 step 5/10 by generation 19."""
-    _check(variant, controller)
-    return SpikingSpec(rest_relative=True, rate_window_steps=1) if controller == "snn" else SigmoidSpec()
+    _check(variant, controller, coding)
+    spec = SpikingSpec(rest_relative=True, rate_window_steps=1) if controller == "snn" else SigmoidSpec()
+    return spec if coding == "study" else replace(spec, input_coding="signed", clip_inputs=False)
 
 
 def study_config(variant: str, controller: str, *, self_loops: bool = False, ga: str = "tuned",
-                 **overrides) -> NEATConfig:
+                 coding: str = "study", **overrides) -> NEATConfig:
     """The NEAT config of ``controller`` on ``variant`` under GA preset ``ga`` (default: the
     study's pick, ``TUNED_GA``): the population of [NEAT02], every input wired to the output at
     the start (plus a bias input for sigmoid NEAT), up to 16 hidden nodes. DPV's threshold is the
     100,000-step balance; DPNV has none (its runs solve by ``study_solved``)."""
-    _check(variant, controller)
+    _check(variant, controller, coding)
     if ga == "tuned":
         ga, extra = ga_choice(variant, controller)
         overrides = {**extra, **overrides}
-    task = study_task(variant)
-    base = dict(num_inputs=task.observation_size, num_outputs=1, pop_size=POPULATION[variant], max_hidden=16,
+    task = study_task(variant, coding)
+    base = dict(num_inputs=network_inputs(task, study_spec(variant, controller, coding)), num_outputs=1, pop_size=POPULATION[variant], max_hidden=16,
                 initial_self_loops=self_loops,
                 fitness_threshold=float(LONG_BALANCE_STEPS) if variant == "dpv" else math.inf)
     if controller == "snn":
@@ -116,19 +128,19 @@ def study_config(variant: str, controller: str, *, self_loops: bool = False, ga:
     return NEATConfig(**base)
 
 
-def study_fitness(variant: str, controller: str, config: NEATConfig) -> TaskFitness:
+def study_fitness(variant: str, controller: str, config: NEATConfig, coding: str = "study") -> TaskFitness:
     """``fitness_fn(genomes) -> [R, P]``: steps balanced (DPV) or the damping fitness (DPNV)."""
-    return TaskFitness(study_task(variant), config, controller, study_spec(variant, controller))
+    return TaskFitness(study_task(variant, coding), config, controller, study_spec(variant, controller, coding))
 
 
-def study_solved(variant: str, controller: str,
-                 config: NEATConfig) -> Callable[[Genomes, Tensor], Tensor] | None:
+def study_solved(variant: str, controller: str, config: NEATConfig,
+                 coding: str = "study") -> Callable[[Genomes, Tensor], Tensor] | None:
     """NEAT 2002's test of a generation as a ``solved_fn(genomes, fitness) -> [R, P]``, or None
     where the fitness threshold decides (DPV: a genome balanced the whole 100,000 steps)."""
-    _check(variant, controller)
+    _check(variant, controller, coding)
     if variant == "dpv":
         return None
-    task, spec = study_task(variant), study_spec(variant, controller)
+    task, spec = study_task(variant, coding), study_spec(variant, controller, coding)
 
     def solved(genomes: Genomes, fitness: Tensor) -> Tensor:
         return champion_solves(genomes, fitness, config, controller, spec, min_general=GENERALIZATION_PASS, task=task)

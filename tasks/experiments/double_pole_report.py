@@ -15,7 +15,7 @@ import statistics
 from pathlib import Path
 
 from tasks.double_pole import GENERALIZATION_STEPS, generalization_starts
-from tasks.experiments.double_pole import PUBLISHED, study_spec, study_task
+from tasks.experiments.double_pole import NEAT121_SCALES, PUBLISHED, study_spec, study_task
 from tasks.experiments.reproduce import LABELS, ControllerRuns, mann_whitney
 
 __all__ = ["study_rows", "write_study_report", "STATIC_MAP_STEPS"]
@@ -29,7 +29,8 @@ def _champion_tests(r: ControllerRuns, variant: str, generalization: bool) -> di
     standard start (up to 1000), each as evolved and as a static map."""
     from tasks.double_pole import balanced_steps
 
-    task, spec = study_task(variant), study_spec(variant, r.controller)
+    coding = r.extra.get("coding", "study")
+    task, spec = study_task(variant, coding), study_spec(variant, r.controller, coding)
     out: dict[str, list[float]] = {}
     if not generalization:
         return out
@@ -68,6 +69,8 @@ def study_rows(results: dict[str, ControllerRuns], variant: str, *, generalizati
                "evaluations_best": min(solved_evals) if solved_evals else math.nan,
                "evaluations_worst": max(solved_evals) if solved_evals else math.nan,
                "evaluations_mean_all": _mean(evals), "wall_s": r.wall_s, "ga": r.extra.get("ga", "")}
+        if r.extra.get("coding", "study") != "study":
+            row["coding"] = r.extra["coding"]
         for key, values in (("hidden_nodes", hidden), ("connections", conns), *(
                 (k, tests[k]) for k in ("generalization", "generalization_static_map") if k in tests)):
             row[f"{key}_mean_all"] = _mean(values)
@@ -111,6 +114,10 @@ def format_study_markdown(summary: dict, command: str) -> str:
         lines.append(f"| {p['method']} | {p['source']} | {_fmt(p.get('population'))} | {p['evaluations']:,} | | | | | "
                      f"{p.get('generalization', '-')} |")
     budget = next(iter(summary["rows"].values()))["generations"]
+    if any(row.get("coding") == "signed" for row in summary["rows"].values()):
+        scales = ", ".join(f"{v:g}" for v in NEAT121_SCALES[variant])
+        lines += ["", f"Input coding: signed, as NEAT C++ 1.2.1 feeds its networks: each observed variable divided by "
+                  f"its scale ({scales}; m, m/s, rad, rad/s), centred and unclipped (`--coding signed`)."]
     lines += ["", f"Evaluations = generations x population, as NEAT 2002 counts them (the champion tests are not "
               f"counted). A run that does not solve within {budget} generations is a failure; the mean over all "
               f"runs (failures as {budget + 1} generations) is in summary.json."]
@@ -186,9 +193,10 @@ def _plot_episode(r: ControllerRuns, variant: str, run: int, label: str):
     from evolution.rollout import rollout
     from tasks.plots import plot_trajectory
 
-    task = study_task(variant).with_fitness("steps", EPISODE_PLOT_STEPS)
+    coding = r.extra.get("coding", "study")
+    task = study_task(variant, coding).with_fitness("steps", EPISODE_PLOT_STEPS)
     one = r.champions.select_runs([run])
-    controller = make_controller(one, r.config, task, study_spec(variant, r.controller), kind=r.controller)
+    controller = make_controller(one, r.config, task, study_spec(variant, r.controller, coding), kind=r.controller)
     trace = rollout(task, controller, record=True).trace
     state, force = trace["state"][:, 0], trace["action"][:, 0, 0]
     return plot_trajectory(state[:, 0], {"θ1 (long pole)": state[:, 2], "θ2 (short pole)": state[:, 4]}, force,

@@ -86,6 +86,7 @@ def _tasks() -> dict[str, Task]:
 
 
 TASKS = ("table1", "table2", "dpv", "dpnv")
+IDENTITY_DEFAULTS = {"coding": "study"}  # a checkpoint written before the key existed had this value
 # Fig. 8 draws solved runs' final best up to the budget, or this many generations where the
 # budget is larger (evolution itself may go on longer; its generations are all drawn).
 FIG8_MAX_PAD = 10_000
@@ -131,9 +132,11 @@ def _progress(total: int, initial: int, desc: str, enabled: bool):
     return tqdm(total=total, initial=initial, desc=desc, unit="gen", disable=not enabled, file=sys.stderr)
 
 
-def study_config(task_name: str, controller: str, *, self_loops: bool = False, ga: str = "tuned") -> NEATConfig:
+def study_config(task_name: str, controller: str, *, self_loops: bool = False, ga: str = "tuned",
+                 coding: str = "study") -> NEATConfig:
     """The NEAT config ``run_controller`` evolves ``controller`` with on ``task_name`` (the CLI's
-    memory check reads it too)."""
+    memory check reads it too). ``coding``: the double-pole studies' input coding
+    (``tasks.experiments.double_pole.CODINGS``); the paper's tables have only their own."""
     from tasks.experiments.cartpole import ga_choice
 
     tasks = _tasks()
@@ -143,21 +146,37 @@ def study_config(task_name: str, controller: str, *, self_loops: bool = False, g
         preset, ga_extra = ga_choice(task_name, controller, ga)
     except ValueError as exc:
         raise ReproduceError(str(exc)) from None
-    return tasks[task_name].config(controller, self_loops=self_loops, ga=preset, **ga_extra)
+    return tasks[task_name].config(controller, self_loops=self_loops, ga=preset, **_coding_kwargs(task_name, coding),
+                                   **ga_extra)
+
+
+def _coding_kwargs(task_name: str, coding: str) -> dict:
+    """``{"coding": coding}`` for the double-pole studies (none for their default), checked."""
+    from tasks.experiments.double_pole import CODINGS, VARIANTS
+
+    if coding not in CODINGS:
+        raise ReproduceError(f"coding must be one of {CODINGS}, got {coding!r}")
+    if coding == "study":
+        return {}
+    if task_name not in VARIANTS:
+        raise ReproduceError(f"--coding {coding} applies to the double-pole studies {VARIANTS}; the paper's tables "
+                             f"keep the paper's coding")
+    return {"coding": coding}
 
 
 def run_controller(task_name: str, controller: str, seeds: list[int], generations: int, out: str | os.PathLike,
                    *, resume: bool = False, self_loops: bool = False, ga: str = "tuned", checkpoint_every: int = 1,
                    device: str | torch.device = "cpu", progress: bool = True,
-                   stop_after: int | None = None) -> ControllerRuns:
+                   stop_after: int | None = None, coding: str = "study") -> ControllerRuns:
     """Evolve ``controller`` on ``task_name`` for each seed (one batch), checkpointing to ``out``.
 
     ``resume`` continues from ``OUT/<controller>.ckpt`` (which must have been written with
     the same task, seeds, budget and start genome); without it an existing checkpoint is an
     error, so a finished reproduction is never overwritten by accident. ``ga``: a GA preset of
     ``tasks.experiments.cartpole.GA_PRESETS``, or ``"tuned"`` (default), the controller's own
-    pick for the table (``TUNED_GA``). ``stop_after``
-    (generations in this call) exists for tests of interruption.
+    pick for the table (``TUNED_GA``). ``coding``: the double-pole studies' input coding
+    (``"study"``, or ``"signed"``: NEAT 1.2.1's). ``stop_after`` (generations in this call)
+    exists for tests of interruption.
     """
     from tasks.experiments.cartpole import describe_ga, ga_choice
 
@@ -175,8 +194,9 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"{controller}.ckpt"
+    coding_kwargs = _coding_kwargs(task_name, coding)
     identity = {"task": task_name, "controller": controller, "seeds": list(seeds), "generations": generations,
-                "self_loops": self_loops, "ga": ga_text}
+                "self_loops": self_loops, "ga": ga_text, "coding": coding}
     if path.exists():
         if not resume:
             raise ReproduceError(f"{path} exists: pass --resume to continue it, or choose another --out")
@@ -184,18 +204,18 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
         saved = data.get("identity")
         saved = saved if isinstance(saved, dict) else {}
         for key, value in identity.items():
-            if saved.get(key) != value:
+            if saved.get(key, IDENTITY_DEFAULTS.get(key)) != value:  # keys added since: their default
                 raise ReproduceError(f"cannot resume {path}: it was written with {key}={saved.get(key)!r}, "
                                      f"this call asks for {key}={value!r}")
         neat, history, wall = _resumed(path, data, device)
         config = neat.config
     else:
-        config = study_config(task_name, controller, self_loops=self_loops, ga=ga)
+        config = study_config(task_name, controller, self_loops=self_loops, ga=ga, coding=coding)
         neat = NEAT(config, seeds=seeds, device=device)
         history, wall = [], 0.0
 
-    fitness_fn = task.fitness(controller, config)
-    solved_fn = task.solved(controller, config) if task.solved is not None else None
+    fitness_fn = task.fitness(controller, config, **coding_kwargs)
+    solved_fn = task.solved(controller, config, **coding_kwargs) if task.solved is not None else None
 
     def save() -> None:
         stacked = torch.stack(history) if history else torch.zeros(0, len(seeds), dtype=torch.float64)
@@ -237,7 +257,7 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
                           best_fitness=neat.best_fitness.cpu().tolist(), history=hist,
                           champions=neat.best_genomes.to("cpu"), config=config, wall_s=wall,
                           extra={"complete": neat.generation >= generations or not bool(neat.active_runs.any()),
-                                 "ga": ga_text})
+                                 "ga": ga_text, "coding": coding})
 
 
 def _resumed(path: Path, data: dict, device: str | torch.device) -> tuple[NEAT, list[Tensor], float]:

@@ -15,10 +15,11 @@ from tasks.experiments.double_pole import (
     study_config,
     study_fitness,
     study_solved,
+    study_spec,
     study_task,
 )
 from tasks.experiments.double_pole_report import study_rows, write_study_report
-from tasks.experiments.reproduce import run_controller
+from tasks.experiments.reproduce import ReproduceError, run_controller
 
 
 def test_the_variants_are_neat_2002s_setups():
@@ -73,3 +74,36 @@ def test_reproduce_dpv_writes_the_study_report(tmp_path):
     steps = saved["runs"]["sigmoid"]["standard_start"]  # the champions' balance, up to 1000 steps
     assert steps == [min(int(f), 1000) for f in saved["runs"]["sigmoid"]["best_fitness"]]
     assert "Hold the standard start 1000 steps" in md
+
+
+def test_the_signed_coding_is_neat_121s_and_reaches_the_networks():
+    for variant, scales in (("dpv", (4.8, 2.0, 0.52, 2.0, 0.52, 2.0)), ("dpnv", (4.8, 0.52, 0.52))):
+        task = study_task(variant, "signed")
+        assert task.observation_high == scales and task.observation_low == tuple(-s for s in scales)
+        for kind in ("snn", "sigmoid"):
+            spec = study_spec(variant, kind, "signed")
+            assert (spec.input_coding, spec.clip_inputs) == ("signed", False)
+            assert study_config(variant, kind, coding="signed").num_inputs == len(scales)
+    cfg = study_config("dpv", "sigmoid", pop_size=20)
+    genomes = NEAT(cfg, seeds=[3]).ask()
+    study = study_fitness("dpv", "sigmoid", cfg)(genomes)
+    signed = study_fitness("dpv", "sigmoid", cfg, "signed")(genomes)
+    assert not torch.equal(study, signed)
+    with pytest.raises(ValueError, match=r"coding must be one of \('study', 'signed'\)"):
+        study_task("dpv", "push_pull")
+
+
+def test_reproduce_with_the_signed_coding_records_it_and_resumes_only_with_it(tmp_path):
+    out = tmp_path / "dpv"
+    r = run_controller("dpv", "sigmoid", [0, 1], 2, out, progress=False, coding="signed")
+    assert r.extra["coding"] == "signed" and r.config == study_config("dpv", "sigmoid", coding="signed")
+    again = run_controller("dpv", "sigmoid", [0, 1], 3, tmp_path / "again", progress=False, coding="signed")
+    assert again.history[:2].equal(r.history)  # the same runs, one generation further
+    with pytest.raises(ReproduceError, match=r"written with coding='signed', this call asks for coding='study'"):
+        run_controller("dpv", "sigmoid", [0, 1], 2, out, progress=False, resume=True)
+    write_study_report({"sigmoid": r}, "dpv", out, command="test", generalization=False)
+    md = (out / "dpv.md").read_text()
+    assert "Input coding: signed, as NEAT C++ 1.2.1 feeds its networks" in md and "4.8, 2, 0.52, 2, 0.52, 2" in md
+    assert json.loads((out / "summary.json").read_text())["rows"]["sigmoid"]["coding"] == "signed"
+    with pytest.raises(ReproduceError, match="--coding signed applies to the double-pole studies"):
+        run_controller("table2", "sigmoid", [0], 1, tmp_path / "t2", progress=False, coding="signed")
