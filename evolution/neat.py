@@ -62,6 +62,9 @@ class NEATResult:
     best_genomes: Genomes  # [R, 1]
     solved_generation: Tensor  # [R] long
     generations: int
+    # [R] long: the index of the first solving genome in that generation (-1: not solved, or not
+    # recorded); NEAT C++ 1.2.1 counts evaluations as pop_size * (generation - 1) + index + 1.
+    solved_position: Tensor | None = None
 
 
 class NEAT:
@@ -94,6 +97,7 @@ class NEAT:
         self.best_fitness = torch.full((R,), -torch.inf, dtype=torch.float64, device=self.rng.device)
         self.best_genomes = self.genomes.gather(torch.zeros(R, 1, dtype=torch.long, device=self.rng.device))
         self.solved_generation = torch.full((R,), -1, dtype=torch.long, device=self.rng.device)
+        self.solved_position = torch.full((R,), -1, dtype=torch.long, device=self.rng.device)
 
     # --- basics ------------------------------------------------------------------------
     @property
@@ -146,6 +150,8 @@ class NEAT:
         self.best_genomes = self.best_genomes.where(better.unsqueeze(1), champions)
         self.best_fitness = torch.where(better, best_f, self.best_fitness)
         self.solved_generation = torch.where(newly, self.generation + 1, self.solved_generation)
+        first = solved.to(torch.int8).argmax(1)  # the first maximal index: the first solving genome
+        self.solved_position = torch.where(newly, first, self.solved_position)
         self._report("post_evaluate", fitness)
         if bool(newly.any()):
             self._report("found_solution", runs[newly].tolist())
@@ -299,7 +305,7 @@ class NEAT:
 
     def result(self) -> NEATResult:
         return NEATResult(self.best_fitness.clone(), self.best_genomes.clone(), self.solved_generation.clone(),
-                          self.generation)
+                          self.generation, self.solved_position.clone())
 
     # --- checkpoints -------------------------------------------------------------------
     def _state_problem(self) -> str | None:
@@ -324,6 +330,7 @@ class NEAT:
             "species_state.next_id": (self.species_state.next_id, (R,), torch.long),
             "best_fitness": (self.best_fitness, (R,), torch.float64),
             "solved_generation": (self.solved_generation, (R,), torch.long),
+            "solved_position": (self.solved_position, (R,), torch.long),
         }
         for key, (t, shape, dtype) in expect.items():
             if not isinstance(t, Tensor) or tuple(t.shape) != shape or t.dtype != dtype:
@@ -337,6 +344,8 @@ class NEAT:
             return f"species holds a slot outside [0, {S})"
         if bool(((self.solved_generation < -1) | (self.solved_generation > self.generation)).any()):
             return f"solved_generation lies outside [-1, {self.generation}]"
+        if bool(((self.solved_position < -1) | (self.solved_position >= P)).any()):
+            return f"solved_position lies outside [-1, {P})"
         if bool(torch.isnan(self.best_fitness).any()):
             return "best_fitness holds NaN"
         return None
@@ -361,6 +370,7 @@ class NEAT:
             "best_fitness": _snapshot(self.best_fitness),
             "best_genomes": {k: _snapshot(v) for k, v in self.best_genomes.tensors().items()},
             "solved_generation": _snapshot(self.solved_generation),
+            "solved_position": _snapshot(self.solved_position),
         }
 
     def save_checkpoint(self, path: str | os.PathLike) -> Path:
@@ -410,6 +420,9 @@ class NEAT:
             self.best_fitness = data["best_fitness"].to(target, copy=True)
             self.best_genomes = Genomes(**{k: v.to(target, copy=True) for k, v in data["best_genomes"].items()})
             self.solved_generation = data["solved_generation"].to(target, copy=True)
+            position = data.get("solved_position")  # absent in checkpoints written before it was kept
+            self.solved_position = (torch.full_like(self.solved_generation, -1) if position is None
+                                    else position.to(target, copy=True))
             self.rng.set_state(data["rng"])
         except CheckpointError:
             raise

@@ -102,7 +102,8 @@ def merge_runs(parts: Sequence[ControllerRuns]) -> ControllerRuns:
     champions = Genomes(**{name: torch.cat([getattr(p.champions, name) for p in parts])
                            for name in first.champions.tensors()})
     extra = {"complete": all(p.extra.get("complete", True) for p in parts), "shards": len(parts),
-             "ga": first.extra.get("ga", ""), "coding": first.extra.get("coding", "study")}
+             "ga": first.extra.get("ga", ""), "coding": first.extra.get("coding", "study"),
+             "solved_position": [q for p in parts for q in p.extra.get("solved_position", [-1] * len(p.seeds))]}
     return ControllerRuns(controller=first.controller, seeds=[s for p in parts for s in p.seeds],
                           generations=first.generations,
                           solved_generation=[g for p in parts for g in p.solved_generation],

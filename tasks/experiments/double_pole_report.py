@@ -18,7 +18,7 @@ from tasks.double_pole import GENERALIZATION_STEPS, generalization_starts
 from tasks.experiments.double_pole import NEAT121_SCALES, PUBLISHED, study_spec, study_task
 from tasks.experiments.reproduce import LABELS, ControllerRuns, mann_whitney
 
-__all__ = ["study_rows", "write_study_report", "STATIC_MAP_STEPS"]
+__all__ = ["study_rows", "write_study_report", "STATIC_MAP_STEPS", "neat121_evaluations"]
 
 EPISODE_PLOT_STEPS = 1000  # control steps of a champion's episode drawn in trajectory_*.png
 STATIC_MAP_STEPS = 20  # control steps (400 ms) a fresh network settles on each observation in the ablation
@@ -58,9 +58,12 @@ def study_rows(results: dict[str, ControllerRuns], variant: str, *, generalizati
         solved = [g > 0 for g in r.solved_generation]
         evals = [g * pop for g in r.counted()]  # a failure counts as (budget + 1) x population
         solved_evals = [e for e, s in zip(evals, solved, strict=True) if s]
+        neat121 = neat121_evaluations(r)
+        neat121_solved = [e for e in neat121 if e is not None]
         hidden, conns = r.champion_sizes()
         tests = _champion_tests(r, variant, generalization)
         per_run[c] = {"seed": r.seeds, "solved_generation": r.solved_generation, "evaluations": evals,
+                      "evaluations_neat121": ["" if e is None else e for e in neat121],
                       "best_fitness": r.best_fitness, "hidden_nodes": hidden, "enabled_connections": conns, **tests}
         row = {"controller": c, "runs": len(evals), "solved": sum(solved), "failures": len(evals) - sum(solved),
                "population": pop, "generations": r.generations,
@@ -68,7 +71,9 @@ def study_rows(results: dict[str, ControllerRuns], variant: str, *, generalizati
                "evaluations_median_solved": statistics.median(solved_evals) if solved_evals else math.nan,
                "evaluations_best": min(solved_evals) if solved_evals else math.nan,
                "evaluations_worst": max(solved_evals) if solved_evals else math.nan,
-               "evaluations_mean_all": _mean(evals), "wall_s": r.wall_s, "ga": r.extra.get("ga", "")}
+               "evaluations_mean_all": _mean(evals), "wall_s": r.wall_s, "ga": r.extra.get("ga", ""),
+               "evaluations_neat121_mean_solved": _mean(neat121_solved),
+               "evaluations_neat121_median_solved": statistics.median(neat121_solved) if neat121_solved else math.nan}
         if r.extra.get("coding", "study") != "study":
             row["coding"] = r.extra["coding"]
         for key, values in (("hidden_nodes", hidden), ("connections", conns), *(
@@ -84,6 +89,16 @@ def study_rows(results: dict[str, ControllerRuns], variant: str, *, generalizati
     if "snn" in results and "sigmoid" in results:
         out["mann_whitney_u"] = mann_whitney(per_run["snn"]["evaluations"], per_run["sigmoid"]["evaluations"])
     return out
+
+
+def neat121_evaluations(r: ControllerRuns) -> list[int | None]:
+    """Per run, evaluations to solve as NEAT C++ 1.2.1 counts them: ``pop_size * (generation - 1)``
+    plus the 1-based position of the first solving genome in its generation; None for a run that
+    did not solve, or whose position was not recorded (results from before it was kept)."""
+    pop = r.config.pop_size
+    positions = r.extra.get("solved_position") or [-1] * len(r.solved_generation)
+    return [pop * (g - 1) + q + 1 if g > 0 and q >= 0 else None
+            for g, q in zip(r.solved_generation, positions, strict=True)]
 
 
 def _fmt(value: float, digits: int = 0) -> str:
@@ -103,23 +118,28 @@ def format_study_markdown(summary: dict, command: str) -> str:
     seeds = summary["seeds"]
     lines = [f"# {title}", "", f"Command: `{command}`", f"Seeds: {seeds[0]}..{seeds[-1]} ({len(seeds)} runs per controller)", "",
              "| Method | Source | Population | Evaluations to solve (mean over solved runs) | Median | Best | Worst | "
-             "Failures | Generalisation (of 625) |", "|---|---|---|---|---|---|---|---|---|"]
+             "Failures | Generalisation (of 625) | NEAT 1.2.1's count: mean | median |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for c, row in summary["rows"].items():
         gen = row.get("generalization_mean_solved")
         lines.append(f"| {LABELS.get(c, c)} | this code | {row['population']:,} | {_fmt(row['evaluations_mean_solved'])} | "
                      f"{_fmt(row['evaluations_median_solved'])} | {_fmt(row['evaluations_best'])} | "
                      f"{_fmt(row['evaluations_worst'])} | {row['failures']}/{row['runs']} | "
-                     f"{_fmt(gen, 1) if gen is not None else '-'} |")
+                     f"{_fmt(gen, 1) if gen is not None else '-'} | "
+                     f"{_fmt(row.get('evaluations_neat121_mean_solved', math.nan))} | "
+                     f"{_fmt(row.get('evaluations_neat121_median_solved', math.nan))} |")
     for p in summary["published"]:
-        lines.append(f"| {p['method']} | {p['source']} | {_fmt(p.get('population'))} | {p['evaluations']:,} | | | | | "
-                     f"{p.get('generalization', '-')} |")
+        lines.append(f"| {p['method']} | {p['source']} | {_fmt(p.get('population'))} | {_fmt(p.get('evaluations'))} | "
+                     f"| | | {p.get('failures', '')} | {p.get('generalization', '-')} | {_fmt(p.get('neat121_mean'))} | "
+                     f"{_fmt(p.get('neat121_median'))} |")
     budget = next(iter(summary["rows"].values()))["generations"]
     if any(row.get("coding") == "signed" for row in summary["rows"].values()):
         scales = ", ".join(f"{v:g}" for v in NEAT121_SCALES[variant])
         lines += ["", f"Input coding: signed, as NEAT C++ 1.2.1 feeds its networks: each observed variable divided by "
                   f"its scale ({scales}; m, m/s, rad, rad/s), centred and unclipped (`--coding signed`)."]
     lines += ["", f"Evaluations = generations x population, as NEAT 2002 counts them (the champion tests are not "
-              f"counted). A run that does not solve within {budget} generations is a failure; the mean over all "
+              f"counted); NEAT C++ 1.2.1 counts population x (generation - 1) + the position of the first solving "
+              f"genome in its generation. A run that does not solve within {budget} generations is a failure; the mean over all "
               f"runs (failures as {budget + 1} generations) is in summary.json."]
     if "mann_whitney_u" in summary:
         mw = summary["mann_whitney_u"]
@@ -155,7 +175,8 @@ def _plot_evaluations(summary: dict):
         else:
             ax.plot([], [], label=f"{LABELS.get(c, c)} (0/{n} solved)")
     for i, p in enumerate(summary["published"]):
-        ax.axvline(p["evaluations"], color=f"C{i + 2}", ls="--", lw=1, label=f"{p['method']} ({p['source']}): mean")
+        mean, counted = (p["evaluations"], "") if "evaluations" in p else (p["neat121_mean"], ", its own count")
+        ax.axvline(mean, color=f"C{i + 2}", ls="--", lw=1, label=f"{p['method']} ({p['source']}): mean{counted}")
     ax.set_xscale("log")
     ax.set_xlabel("evaluations to solve")
     ax.set_ylabel("fraction of runs solved")
@@ -223,7 +244,8 @@ def write_study_report(results: dict[str, ControllerRuns], variant: str, out: st
 
     buf = io.StringIO()
     w = csv.writer(buf)
-    keys = ["seed", "solved_generation", "evaluations", "best_fitness", "hidden_nodes", "enabled_connections",
+    keys = ["seed", "solved_generation", "evaluations", "evaluations_neat121", "best_fitness", "hidden_nodes",
+            "enabled_connections",
             "generalization", "generalization_static_map", "standard_start", "standard_start_static_map"]
     w.writerow(["controller", "run", *keys])
     for c, runs in summary["runs"].items():

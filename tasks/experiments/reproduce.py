@@ -257,7 +257,8 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
                           best_fitness=neat.best_fitness.cpu().tolist(), history=hist,
                           champions=neat.best_genomes.to("cpu"), config=config, wall_s=wall,
                           extra={"complete": neat.generation >= generations or not bool(neat.active_runs.any()),
-                                 "ga": ga_text, "coding": coding})
+                                 "ga": ga_text, "coding": coding,
+                                 "solved_position": neat.solved_position.cpu().tolist()})
 
 
 def _resumed(path: Path, data: dict, device: str | torch.device) -> tuple[NEAT, list[Tensor], float]:

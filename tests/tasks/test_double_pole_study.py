@@ -107,3 +107,31 @@ def test_reproduce_with_the_signed_coding_records_it_and_resumes_only_with_it(tm
     assert json.loads((out / "summary.json").read_text())["rows"]["sigmoid"]["coding"] == "signed"
     with pytest.raises(ReproduceError, match="--coding signed applies to the double-pole studies"):
         run_controller("table2", "sigmoid", [0], 1, tmp_path / "t2", progress=False, coding="signed")
+
+
+def test_evaluations_are_also_counted_as_neat_121_counts_them(tmp_path):
+    """population x (generation - 1) + the first solving genome's 1-based position in its generation."""
+    from tasks.experiments.double_pole_report import neat121_evaluations
+
+    cfg = study_config("dpv", "sigmoid", pop_size=10, fitness_threshold=50.0)
+    neat = NEAT(cfg, seeds=[0, 1, 2])
+    fitness = torch.zeros(3, 10, dtype=torch.float64)
+    fitness[0, 7], fitness[0, 9] = 60.0, 80.0  # run 0: genomes 7 and 9 solve in generation 1
+    neat.tell(fitness)
+    fitness = torch.zeros(3, 10, dtype=torch.float64)
+    fitness[1, 3] = 55.0  # run 1: genome 3 in generation 2; run 2 never
+    neat.tell(fitness)
+    assert neat.solved_generation.tolist() == [1, 2, -1] and neat.solved_position.tolist() == [7, 3, -1]
+    assert neat.result().solved_position.tolist() == [7, 3, -1]
+    again = NEAT.from_state_dict(neat.state_dict())  # kept in checkpoints
+    assert again.solved_position.tolist() == [7, 3, -1]
+    old = neat.state_dict()
+    del old["solved_position"]  # a checkpoint from before: positions unknown
+    assert NEAT.from_state_dict(old).solved_position.tolist() == [-1, -1, -1]
+    r = run_controller("dpv", "sigmoid", [0, 1], 1, tmp_path, progress=False)
+    r.solved_generation, r.extra["solved_position"] = [1, 3], [7, 3]
+    assert neat121_evaluations(r) == [8, 304]
+    r.extra["solved_position"] = [-1, 3]
+    assert neat121_evaluations(r) == [None, 304]
+    md_rows = study_rows({"sigmoid": r}, "dpv", generalization=False)["rows"]["sigmoid"]
+    assert md_rows["evaluations_neat121_mean_solved"] == 304
