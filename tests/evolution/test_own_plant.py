@@ -205,3 +205,14 @@ def test_the_docs_pendulum_example_evolves_and_its_random_genomes_run():
     assert namespace["trace"]["action"].shape[1:] == (2, 1)
     exec(next(b for b in blocks if "random_genomes(" in b), namespace)
     assert namespace["steps"].shape == (64, 2) and int(namespace["steps"].min()) >= 1
+
+
+def test_the_readmes_quick_start_on_your_own_plant_runs():
+    text = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    block = next(b.split("```")[0] for b in text.split("```python\n")[1:] if "class Pendulum(Task)" in b)
+    small = block.replace("generations=10", "generations=2")
+    assert small != block
+    namespace: dict = {}
+    exec(small, namespace)
+    assert namespace["result"].best_fitness.shape == (4,)
+    assert namespace["config"].num_inputs == 2 and namespace["fitness"].kind == "snn"
