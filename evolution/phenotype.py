@@ -32,7 +32,7 @@ from evolution.config import NEATConfig
 from evolution.input_coding import check_coding, inputs_per_observation
 from evolution.population import Genomes
 from snn_torch.functional.counter_rng import fnv1a_keys
-from snn_torch.functional.decode import ordered_matvec
+from snn_torch.functional.decode import bang_bang_force, ordered_matvec
 from snn_torch.functional.izhikevich import (
     QIU2019,
     IzhikevichParams,
@@ -44,7 +44,6 @@ from snn_torch.functional.izhikevich import (
 )
 from snn_torch.functional.network_kernel import RateControlKernel
 from snn_torch.functional.recurrent import RecurrentState
-from snn_torch.functional.scalars import scalar
 from snn_torch.modules.coding import (
     BangBang,
     BernoulliEncoder,
@@ -551,7 +550,7 @@ class SigmoidController(_Phenotype):
                                       network=state.network)
         out = y[:, self.outputs]
         if self.spec.decoder == "bang_bang":  # +-action_max rounded to the dtype, as the episode loop's
-            action = torch.where(out > 0.5, scalar(self.action_max, out), scalar(-self.action_max, out))
+            action = bang_bang_force(out, threshold=0.5, f_max=self.action_max)
         else:
             action = self.action_max * (2.0 * out - 1.0)
         return action, SigmoidState(state.network, y), y

@@ -8,8 +8,9 @@ import torch
 from torch import Tensor
 
 from snn_torch.functional.portable_math import sigmoid as portable_sigmoid
+from snn_torch.functional.scalars import scalars
 
-__all__ = ["firing_rate", "weighted_rate_force", "bang_bang_force", "ordered_sum", "ordered_matvec",
+__all__ = ["firing_rate", "weighted_rate_force", "sigmoid_force", "bang_bang_force", "ordered_sum", "ordered_matvec",
            "ordered_sigmoid"]
 
 _CUMSUM_MAX = 32768  # elements up to which one cumsum beats a loop over the slots (measured, this CPU)
@@ -75,12 +76,21 @@ def weighted_rate_force(
         Force in ``(-f_max, f_max)``, shape ``rates.shape[:-1]``.
     """
     drive = ordered_sum(rates * weights, dim=-1)  # slot order: independent of batch and slot count
-    return f_max * (2.0 * ordered_sigmoid(sigma * drive) - 1.0)
+    return sigmoid_force(drive, sigma, f_max=f_max)
 
 
-def bang_bang_force(drive: Tensor, *, threshold: float | Tensor, f_max: float = 10.0) -> Tensor:
-    """Binary force: ``+f_max`` (N) where ``drive >= threshold``, else ``-f_max``.
+def sigmoid_force(drive: Tensor, sigma: Tensor | float = 1.0, *, f_max: float = 10.0) -> Tensor:
+    """``F = f_max (2 sigmoid(sigma * drive) - 1)`` (N), in ``(-f_max, f_max)`` ([Qiu19] eq. 10), in
+    the drive's dtype: the decoder of ``modules.SigmoidForce`` and of the C kernels."""
+    y = ordered_sigmoid(sigma * drive)
+    f, two, one = scalars((f_max, 2.0, 1.0), y)
+    return f * (two * y - one)
 
-    Qiu et al.'s Markov task pushes with +-10 N decided from the output's firing rate.
-    """
-    return torch.where(drive >= threshold, f_max, -f_max).to(drive.dtype)
+
+def bang_bang_force(drive: Tensor, *, threshold: float | Tensor = 0.0, f_max: float = 10.0) -> Tensor:
+    """Binary force: ``+f_max`` (N) where ``drive > threshold``, else ``-f_max``, in the drive's
+    dtype. The one threshold rule of every bang-bang decoder here (``modules.BangBang``, the
+    sigmoid controller's on its output > 0.5, and the C kernels'): a drive exactly at the
+    threshold pushes negative. Qiu et al.'s Markov task pushes with +-10 N this way."""
+    plus, minus = scalars((f_max, -f_max), drive)  # +-f_max rounded to the drive's dtype
+    return torch.where(drive > threshold, plus, minus)

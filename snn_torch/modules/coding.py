@@ -20,8 +20,8 @@ import torch
 from torch import Tensor, nn
 
 from snn_torch.functional.counter_rng import BernoulliSources
-from snn_torch.functional.decode import ordered_sigmoid
-from snn_torch.functional.scalars import scalar, scalars
+from snn_torch.functional.decode import bang_bang_force, sigmoid_force
+from snn_torch.functional.scalars import scalar
 
 __all__ = ["CurrentEncoder", "BernoulliEncoder", "RateWindow", "RateWindowState", "SigmoidForce", "BangBang",
            "LinearReadout"]
@@ -134,9 +134,7 @@ class SigmoidForce(nn.Module):
         self.f_max = _finite("f_max", f_max, positive=True)
 
     def forward(self, drive: Tensor, sigma: Tensor | float = 1.0) -> Tensor:
-        y = ordered_sigmoid(sigma * drive)
-        f_max, two, one = scalars((self.f_max, 2.0, 1.0), y)
-        return f_max * (two * y - one)
+        return sigmoid_force(drive, sigma, f_max=self.f_max)
 
     def extra_repr(self) -> str:
         return f"f_max={self.f_max} (N)"
@@ -151,8 +149,7 @@ class BangBang(nn.Module):
         self.threshold = _finite("threshold", threshold)
 
     def forward(self, drive: Tensor) -> Tensor:
-        f_max, neg = scalars((self.f_max, -self.f_max), drive)  # +-f_max rounded to the drive's dtype
-        return torch.where(drive > self.threshold, f_max, neg)
+        return bang_bang_force(drive, threshold=self.threshold, f_max=self.f_max)
 
     def extra_repr(self) -> str:
         return f"f_max={self.f_max} (N), threshold={self.threshold}"

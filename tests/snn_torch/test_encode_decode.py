@@ -99,5 +99,29 @@ def test_weighted_rate_force_is_the_papers_equation():
 
 
 def test_bang_bang_force():
-    torch.testing.assert_close(bang_bang_force(torch.tensor([10.0, 50.0, 49.9]), threshold=50.0),
-                               torch.tensor([-10.0, 10.0, -10.0]))
+    # strictly above the threshold pushes positive; exactly at it, negative (one rule everywhere)
+    torch.testing.assert_close(bang_bang_force(torch.tensor([10.0, 50.0, 49.9, 50.1]), threshold=50.0),
+                               torch.tensor([-10.0, -10.0, -10.0, 10.0]))
+
+
+def test_every_bang_bang_decoder_applies_one_threshold_rule():
+    """The functional decoder, the module, the sigmoid controller (output > 0.5) and the C kernels
+    agree at the threshold itself."""
+    from evolution import NEAT, NEATConfig, SigmoidSpec, make_controller
+    from snn_torch.modules.coding import BangBang
+
+    drive = torch.tensor([-1.0, 0.0, 1e-7, 2.0], dtype=torch.float64)
+    expected = torch.tensor([-3.0, -3.0, 3.0, 3.0], dtype=torch.float64)
+    assert torch.equal(bang_bang_force(drive, f_max=3.0), expected)
+    assert torch.equal(BangBang(3.0)(drive), expected)
+
+    class Still:  # a plant whose observations put the sigmoid output exactly at 0.5
+        observation_size, action_size, action_max = 1, 1, 3.0
+
+    cfg = NEATConfig(num_inputs=1, num_outputs=1, num_bias=0, pop_size=2, max_hidden=0, sigma_mutate_rate=0.0,
+                     compatibility_sigma_coefficient=0.0)
+    genomes = NEAT(cfg).ask()
+    genomes.weight.zero_()  # output = sigmoid(0) = 0.5 exactly
+    controller = make_controller(genomes, cfg, Still(), SigmoidSpec(decoder="bang_bang"))
+    action, _, _ = controller.act(torch.zeros(2, 1), controller.initial_state(torch.arange(2)))
+    assert action.flatten().tolist() == [-3.0, -3.0]
