@@ -1,14 +1,19 @@
-"""A gymnasium environment through the seam (``tasks.gym_adapter.GymTask``) beside a torch port of
-the same plant through the seam, side by side in one process.
+"""gymnasium's classic-control environments through the seam: the adapter (``GymTask(id,
+adapter=True)``: one gymnasium environment per row, stepped in Python) beside the batched torch
+port with its native step (``GymTask(id)``), in one process, one thread.
 
-    python benchmarks/gym_speed.py                  # 150 genomes, 200-step episodes, one thread
-    python benchmarks/gym_speed.py --genomes 1000 --repeats 5
+    python benchmarks/gym_speed.py                 # 150 and 9000 rows, 200-step episodes, 3 repeats
+    python benchmarks/gym_speed.py --quick         # a smoke run: 20 steps, 1 repeat, adapter on 150 rows
+    python benchmarks/gym_speed.py --rows 150 1000 --adapter-rows 500 --repeats 5
 
-Both run the same random NEAT-SNN population (4 inputs, one output) on a cart-pole: gymnasium's
-``CartPole-v1`` (Python, one environment per row) and ``tasks.cartpole.CartPoleTask`` with all
-four variables observed and a 0.02 s step (the same Barto equations, in batched torch). Episodes
-end on failure, so the rate counts the control steps actually simulated: genome-steps/s, medians
-of ``--repeats``, interleaved.
+Every environment runs the same kind of population: random NEAT-SNN genomes
+(``evolution.random_genomes``: 2 hidden neurons, half the possible connections) with the
+``SpikingSpec`` defaults, one episode per genome (a row), from the task's seeded starts. Episodes
+end on termination or after ``--steps``, so the rate counts the control steps actually simulated:
+genome-steps/s, the median of ``--repeats``, the two paths interleaved. The adapter's cost is a
+Python call per environment per step, so its rate hardly depends on the batch: it runs on at most
+``--adapter-rows`` rows (the table says how many it ran on), as 9000 gymnasium environments
+would take minutes per repeat.
 """
 
 from __future__ import annotations
@@ -19,15 +24,16 @@ import time
 
 import torch
 
-from evolution import NEAT, make_controller, rollout, spiking_config
-from tasks.cartpole import CartPoleTask
-from tasks.gym_adapter import GymTask
+from evolution import SpikingSpec, make_controller, random_genomes, rollout, task_config
+from tasks.gym_adapter import PORTS, GymTask
 
-BOUNDS = ((-2.4, -3.0, -0.21, -3.5), (2.4, 3.0, 0.21, 3.5))
+CARTPOLE_BOUNDS = ((-2.4, -3.0, -0.21, -3.5), (2.4, 3.0, 0.21, 3.5))  # gymnasium's velocities are unbounded
 
 
-def timed(task, genomes, cfg, steps: int) -> tuple[float, int]:
-    controller = make_controller(genomes, cfg, task)
+def timed(task, rows: int, steps: int) -> tuple[float, int]:
+    """``(seconds, genome-steps)`` of one rollout of ``rows`` random genomes on ``task``."""
+    cfg = task_config(task, "snn", pop_size=rows)
+    controller = make_controller(random_genomes(cfg, hidden=2, density=0.5, seed=0), cfg, task, SpikingSpec())
     t0 = time.perf_counter()
     result = rollout(task, controller, max_steps=steps, seed=0)
     return time.perf_counter() - t0, int(result.steps.sum() + result.terminated.sum())
@@ -35,29 +41,33 @@ def timed(task, genomes, cfg, steps: int) -> tuple[float, int]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--genomes", type=int, default=150)
-    parser.add_argument("--steps", type=int, default=200)
+    parser.add_argument("--rows", type=int, nargs="+", default=[150, 9000], help="genomes (one episode each)")
+    parser.add_argument("--steps", type=int, default=200, help="most control steps per episode")
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--adapter-rows", type=int, default=1500, help="most rows the adapter runs on")
+    parser.add_argument("--quick", action="store_true", help="20 steps, 1 repeat, the adapter on 150 rows")
     args = parser.parse_args()
+    if args.quick:
+        args.steps, args.repeats, args.adapter_rows = 20, 1, 150
     torch.set_num_threads(1)
-    cfg = spiking_config(num_inputs=4, num_outputs=1, pop_size=args.genomes, max_hidden=4)
-    neat = NEAT(cfg, seeds=[0])
-    neat.run(lambda g: torch.rand(1, args.genomes, dtype=torch.float64), 5)  # some structure, random selection
-    genomes = neat.ask()
-    tasks = {"gymnasium CartPole-v1": GymTask("CartPole-v1", observation_bounds=BOUNDS, max_steps=args.steps),
-             "torch port (seam)": CartPoleTask((0, 1, 2, 3), tau_s=0.02, max_steps=args.steps)}
-    for task in tasks.values():
-        timed(task, genomes, cfg, 2)  # warm-up: kernels, first calls
-    rates: dict[str, list[float]] = {name: [] for name in tasks}
-    for _ in range(args.repeats):
-        for name, task in tasks.items():
-            seconds, steps = timed(task, genomes, cfg, args.steps)
-            rates[name].append(steps / seconds)
-    print(f"{args.genomes} genomes, episodes of up to {args.steps} steps, one thread, medians of {args.repeats}")
-    print(f"{'path':<24}{'genome-steps/s':>16}{'vs torch port':>15}")
-    port = statistics.median(rates["torch port (seam)"])
-    for name, r in rates.items():
-        print(f"{name:<24}{statistics.median(r):>16.3g}{statistics.median(r) / port:>14.2f}x")
+    print(f"random NEAT-SNN genomes, one episode each, up to {args.steps} steps, one thread, "
+          f"medians of {args.repeats}; genome-steps/s")
+    print("| environment | rows | adapter | adapter rows | port | port / adapter |")
+    print("|---|---|---|---|---|---|")
+    for env_id in PORTS:
+        bounds = {"observation_bounds": CARTPOLE_BOUNDS} if env_id == "CartPole-v1" else {}
+        paths = {"adapter": GymTask(env_id, adapter=True, **bounds), "port": GymTask(env_id, **bounds)}
+        for rows in args.rows:
+            sizes = {"adapter": min(rows, args.adapter_rows), "port": rows}
+            for name, task in paths.items():
+                timed(task, min(sizes[name], 8), 2)  # warm-up: kernels, native builds, first calls
+            rates: dict[str, list[float]] = {name: [] for name in paths}
+            for _ in range(args.repeats):
+                for name, task in paths.items():
+                    seconds, steps = timed(task, sizes[name], args.steps)
+                    rates[name].append(steps / seconds)
+            adapter, port = (statistics.median(rates[name]) for name in ("adapter", "port"))
+            print(f"| {env_id} | {rows} | {adapter:.3g} | {sizes['adapter']} | {port:.3g} | {port / adapter:.0f}x |")
 
 
 if __name__ == "__main__":

@@ -1,12 +1,26 @@
-"""Any gymnasium environment as a task of the seam (``pip install "snn-neat[gym]"``).
+"""gymnasium environments as tasks of the seam (``pip install "snn-neat[gym]"``).
 
-``GymTask("CartPole-v1")`` makes one gymnasium environment per rollout row and steps them from
-the seam: NEAT, weight search, plots and checkpoints then work on it like on a torch plant.
-Gymnasium environments are Python objects stepped one at a time, so this path costs what the
-environment costs (``benchmarks/gym_speed.py`` prints it beside a torch port through the seam);
-write the plant in torch (``evolution.Task``) when speed matters.
+``GymTask(env_id)`` is the entry point. For the classic-control environments with a batched
+torch port, ``CartPole-v1`` (``tasks.gym_cartpole``), ``Acrobot-v1`` (``tasks.acrobot``),
+``MountainCar-v0`` and ``MountainCarContinuous-v0`` (``tasks.mountain_car``) and ``Pendulum-v1``
+(``tasks.pendulum``), it returns the port: the same environment as batched tensor operations
+with a native step (checked against gymnasium's own environment, ``tests/tasks/
+test_classic_control.py``), so a rollout costs what the network costs. ``observation_bounds``,
+``max_steps`` and ``control_period_s`` pass through (unset: the port's defaults, except the
+observation bounds, which are the observation space's as for the adapter, so both paths code
+observations alike); a ``make_kwargs`` the port does not model (anything but Pendulum's ``g``:
+``render_mode``, ``max_episode_steps``, ...) falls back to the adapter. ``GymTask(env_id,
+adapter=True)`` forces the adapter. The returned port is an instance of its own class
+(``PendulumTask``, ``AcrobotTask``, ...), not of ``GymTask``; it carries the adapter's
+``discrete`` (``n`` of a ``Discrete(n)`` action space, 0 for a ``Box``).
 
-How it maps onto the seam's functional protocol:
+Any other environment runs through the adapter, which makes one gymnasium environment per
+rollout row and steps them from the seam: NEAT, weight search, plots and checkpoints then work
+on it like on a torch plant. Gymnasium environments are Python objects stepped one at a time,
+so this path costs what the environment costs (``benchmarks/gym_speed.py`` prints it beside the
+ports); write the plant in torch (``evolution.Task``) when speed matters.
+
+How the adapter maps onto the seam's functional protocol:
 
 - The state of a row is ``[B, 3 + n_obs]`` float64: the episode's seed, the row's environment
   (-1 until the first step makes it), whether it is done, and the last observation.
@@ -15,15 +29,19 @@ How it maps onto the seam's functional protocol:
   so every genome faces the same starts, and the first ``step`` gives each row its own
   environment, reset with the same seed, so it starts where ``reset`` said.
 - Observations are normalised by the seam over the observation space's bounds; infinite bounds
-  (CartPole's velocities) must be given as ``observation_bounds``.
+  (CartPole's velocities) must be given as ``observation_bounds`` (for the port too).
 - Actions: a ``Discrete(n)`` space takes one continuous output in ``[-1, 1]`` split into ``n``
-  equal bins (``n = 2``: push left below 0, right above); a ``Box`` space takes its shape's
-  outputs, scaled to its symmetric bound.
+  equal bins (``n = 2``: push left below 0, right above; ``discrete_action``, which the ports
+  use too); a ``Box`` space takes its shape's outputs, scaled to its symmetric bound.
 - ``terminated or truncated`` ends an episode; fitness is the return.
+
+This module also holds what the ports share: ``discrete_action`` and ``port_options`` (their
+constructor options, checked).
 """
 
 from __future__ import annotations
 
+import importlib
 import math
 from collections.abc import Sequence
 
@@ -32,10 +50,21 @@ import torch
 from torch import Tensor
 
 from evolution.task import Task, TaskError
+from snn_torch.functional.scalars import scalars
 
-__all__ = ["GymTask"]
+__all__ = ["GymTask", "PORTS", "discrete_action", "port_options"]
 
 _SEED, _ENV, _DONE, _OBS = 0, 1, 2, 3  # state columns
+Bounds = tuple[Sequence[float], Sequence[float]]
+
+# gymnasium id -> (module, class, the make_kwargs the port models): what GymTask returns
+PORTS: dict[str, tuple[str, str, tuple[str, ...]]] = {
+    "CartPole-v1": ("tasks.gym_cartpole", "GymCartPoleTask", ()),
+    "Acrobot-v1": ("tasks.acrobot", "AcrobotTask", ()),
+    "MountainCar-v0": ("tasks.mountain_car", "MountainCarTask", ()),
+    "MountainCarContinuous-v0": ("tasks.mountain_car", "MountainCarContinuousTask", ()),
+    "Pendulum-v1": ("tasks.pendulum", "PendulumTask", ("g",)),
+}
 
 
 def _gymnasium():
@@ -46,37 +75,104 @@ def _gymnasium():
     return gymnasium
 
 
+def discrete_action(action: Tensor, n: int) -> Tensor:
+    """gymnasium's ``Discrete(n)`` action of each row of ``action`` (``[B, 1]``, a continuous output
+    in [-1, 1]): ``min(n - 1, max(0, floor((a + 1) / 2 * n)))`` as ``[B]`` float64 indices, computed
+    in float64 from the action widened exactly (as ``GymTask`` bins it, and the ports' C steps)."""
+    a = action[:, 0].to(torch.float64)
+    one, two, bins = scalars((1.0, 2.0, float(n)), a)
+    return torch.clamp(torch.floor((a + one) / two * bins), 0.0, float(n - 1))
+
+
+def port_options(task: str, observation_bounds: Bounds | None, default: Bounds, max_steps: int,
+                 control_period_s: float) -> tuple[tuple[float, ...], tuple[float, ...], int, float]:
+    """A port's ``(observation_low, observation_high, max_steps, control_period_s)``, checked:
+    ``ValueError`` naming ``task``'s field. ``observation_bounds``: ``(low, high)`` replacing
+    ``default``, as many finite values each, ``high > low``."""
+    try:
+        low, high = default if observation_bounds is None else observation_bounds
+        low, high = tuple(float(v) for v in low), tuple(float(v) for v in high)
+    except (TypeError, ValueError):
+        raise ValueError(f"{task}.observation_bounds must be (low, high) sequences of numbers, "
+                         f"got {observation_bounds!r}") from None
+    n = len(default[0])
+    if len(low) != n or len(high) != n or not all(math.isfinite(v) for v in low + high) or \
+            not all(h > lo for lo, h in zip(low, high, strict=True)):
+        raise ValueError(f"{task}.observation_bounds must give {n} finite lows and highs with high > low, "
+                         f"got {observation_bounds!r}")
+    if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
+        raise ValueError(f"{task}.max_steps must be a positive int (control steps), got {max_steps!r}")
+    if isinstance(control_period_s, bool) or not isinstance(control_period_s, (int, float)) or \
+            not (math.isfinite(control_period_s) and control_period_s > 0):
+        raise ValueError(f"{task}.control_period_s must be a positive finite number (s), got {control_period_s!r}")
+    return low, high, max_steps, float(control_period_s)
+
+
+def _space_bounds(name: str, obs_space, observation_bounds: Bounds | None) -> tuple[np.ndarray, np.ndarray]:
+    """The observation bounds the adapter uses (the Box space's, or ``observation_bounds``); a
+    ``TaskError`` where they are infinite or of the wrong length."""
+    gym = _gymnasium()
+    if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape) != 1:
+        raise TaskError(f"task {name!r}: needs a flat Box observation space, got {obs_space}")
+    low, high = (np.asarray(b, dtype=np.float64) for b in (observation_bounds or (obs_space.low, obs_space.high)))
+    if low.shape != obs_space.shape or high.shape != obs_space.shape:
+        raise TaskError(f"task {name!r}: observation_bounds must give {obs_space.shape[0]} lows and highs")
+    infinite = [k for k in range(low.shape[0]) if not (math.isfinite(low[k]) and math.isfinite(high[k]))]
+    if infinite:
+        raise TaskError(f"task {name!r}: observation variables {infinite} have infinite bounds in "
+                        f"{obs_space}; pass observation_bounds=(low, high)")
+    return low, high
+
+
 class GymTask(Task):
-    """A gymnasium environment (``env_id``, made with ``gymnasium.make(env_id, **make_kwargs)``).
+    """A gymnasium environment (``env_id``, made with ``gymnasium.make(env_id, **make_kwargs)``):
+    the torch port where there is one (``PORTS``; see the module docstring), else the adapter.
 
     Args:
         env_id: the registered id, e.g. ``"CartPole-v1"``, ``"Pendulum-v1"``.
+        adapter: True to step gymnasium's own environments even where a port exists.
         observation_bounds: ``(low, high)`` sequences replacing the observation space's bounds
             (needed where those are infinite).
         max_steps: episode length (default: the environment's ``max_episode_steps``, else 1000).
         control_period_s: network time per step (s; spiking controllers run
-            ``control_period_s / dt`` substeps), default 0.02.
+            ``control_period_s / dt`` substeps); default: the port's (its environment's step
+            where it has one), 0.02 for the adapter.
     """
 
     fitness = "return"
 
-    def __init__(self, env_id: str, *, observation_bounds: tuple[Sequence[float], Sequence[float]] | None = None,
-                 max_steps: int | None = None, control_period_s: float = 0.02, **make_kwargs) -> None:
+    def __new__(cls, env_id: str | None = None, *, adapter: bool = False,
+                observation_bounds: Bounds | None = None, max_steps: int | None = None,
+                control_period_s: float | None = None, **make_kwargs):
+        # env_id None: unpickling or copying an adapter (object.__reduce_ex__ calls cls.__new__(cls))
+        port = PORTS.get(env_id) if cls is GymTask and not adapter and isinstance(env_id, str) else None
+        if port is None or not set(make_kwargs) <= set(port[2]):
+            return super().__new__(cls)
+        module, class_name, _ = port
+        probe = _gymnasium().make(env_id, **make_kwargs)
+        space = probe.observation_space
+        probe.close()
+        low, high = _space_bounds(f"gym:{env_id}", space, observation_bounds)  # as the adapter's, so both agree
+        options = {"observation_bounds": (tuple(low.tolist()), tuple(high.tolist())), **make_kwargs}
+        if max_steps is not None:
+            options["max_steps"] = max_steps
+        if control_period_s is not None:
+            options["control_period_s"] = control_period_s
+        task = getattr(importlib.import_module(module), class_name)(**options)
+        if not hasattr(task, "discrete"):  # the adapter's attribute, on every task GymTask returns
+            task.discrete = 0
+        return task
+
+    def __init__(self, env_id: str, *, adapter: bool = False,
+                 observation_bounds: Bounds | None = None, max_steps: int | None = None,
+                 control_period_s: float | None = None, **make_kwargs) -> None:
         gym = _gymnasium()
         self.env_id, self.make_kwargs, self.name = env_id, make_kwargs, f"gym:{env_id}"
         probe = gym.make(env_id, **make_kwargs)
         obs_space, act_space = probe.observation_space, probe.action_space
         spec_steps = probe.spec.max_episode_steps if probe.spec is not None else None
         probe.close()
-        if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape) != 1:
-            raise TaskError(f"task {self.name!r}: needs a flat Box observation space, got {obs_space}")
-        low, high = (np.asarray(b, dtype=np.float64) for b in (observation_bounds or (obs_space.low, obs_space.high)))
-        if low.shape != obs_space.shape or high.shape != obs_space.shape:
-            raise TaskError(f"task {self.name!r}: observation_bounds must give {obs_space.shape[0]} lows and highs")
-        infinite = [k for k in range(low.shape[0]) if not (math.isfinite(low[k]) and math.isfinite(high[k]))]
-        if infinite:
-            raise TaskError(f"task {self.name!r}: observation variables {infinite} have infinite bounds in "
-                            f"{obs_space}; pass observation_bounds=(low, high)")
+        low, high = _space_bounds(self.name, obs_space, observation_bounds)
         self.observation_low, self.observation_high = tuple(low.tolist()), tuple(high.tolist())
         if isinstance(act_space, gym.spaces.Discrete):
             self.discrete, self.action_size, self.action_max = int(act_space.n), 1, 1.0
@@ -89,7 +185,7 @@ class GymTask(Task):
             raise TaskError(f"task {self.name!r}: needs a Discrete or symmetric, finite Box action space, "
                             f"got {act_space}")
         self.max_steps = int(max_steps if max_steps is not None else spec_steps or 1000)
-        self.control_period_s = float(control_period_s)
+        self.control_period_s = float(0.02 if control_period_s is None else control_period_s)
         self._envs: list = []
         self.validate()
 
@@ -114,7 +210,7 @@ class GymTask(Task):
         return state.to(device)
 
     def _action(self, a: np.ndarray):
-        if self.discrete:  # [-1, 1] in n equal bins
+        if self.discrete:  # [-1, 1] in n equal bins (discrete_action: the same, batched)
             return int(min(self.discrete - 1, max(0, math.floor((a[0] + 1.0) / 2.0 * self.discrete))))
         return (a * self._action_scale).astype(np.float32)
 

@@ -25,6 +25,7 @@ from torch import Tensor
 from evolution.task import NativeStep, Task
 from snn_torch.functional.portable_math import sin_cos
 from snn_torch.functional.scalars import scalars
+from tasks.gym_adapter import Bounds, port_options
 
 __all__ = ["PendulumTask", "pendulum_step", "angle_normalize"]
 
@@ -64,20 +65,27 @@ class PendulumTask(Task):
         observe_velocity: observe theta_dot (gymnasium's observation) or only cos and sin.
         max_steps: episode length (control steps of 0.05 s; gymnasium's time limit: 200).
         g: gravity (m/s^2; gymnasium's default 10).
+        control_period_s: network time per control step (s; spiking controllers run
+            ``control_period_s / dt`` substeps); default gymnasium's dt, 0.05 s. The plant always
+            advances 0.05 s.
+        observation_bounds: ``(low, high)`` of the observed values replacing gymnasium's (+-1 for
+            cos and sin, +-8 rad/s for theta_dot).
     """
 
     action_size = 1
     action_max = MAX_TORQUE
-    control_period_s = DT_S
     fitness = "return"
 
-    def __init__(self, *, observe_velocity: bool = True, max_steps: int = 200, g: float = 10.0) -> None:
+    def __init__(self, *, observe_velocity: bool = True, max_steps: int = 200, g: float = 10.0,
+                 control_period_s: float = DT_S, observation_bounds: Bounds | None = None) -> None:
         if not (isinstance(g, (int, float)) and math.isfinite(g) and g > 0) or isinstance(g, bool):
             raise ValueError(f"PendulumTask.g must be a positive finite number (m/s^2), got {g!r}")
-        self.observe_velocity, self.max_steps, self.g = bool(observe_velocity), max_steps, float(g)
+        n_obs = 3 if observe_velocity else 2
+        default = ((-1.0, -1.0, -MAX_SPEED)[:n_obs], (1.0, 1.0, MAX_SPEED)[:n_obs])
+        self.observation_low, self.observation_high, self.max_steps, self.control_period_s = port_options(
+            "PendulumTask", observation_bounds, default, max_steps, control_period_s)
+        self.observe_velocity, self.g = bool(observe_velocity), float(g)
         self.name = "pendulum" if observe_velocity else "pendulum-no-velocity"
-        self.observation_low = (-1.0, -1.0, -MAX_SPEED)[: 3 if observe_velocity else 2]
-        self.observation_high = (1.0, 1.0, MAX_SPEED)[: 3 if observe_velocity else 2]
         # the same step in C (tasks/csrc/pendulum.c), for whole episodes in one native call
         self.native = NativeStep(_CSRC / "pendulum.c", "pendulum", 2, params=(
             3.0 * self.g / 2.0, 3.0, DT_S, MAX_SPEED, MAX_TORQUE, 0.1, 0.001, math.pi, 2.0 * math.pi,

@@ -12,7 +12,7 @@ CARTPOLE_BOUNDS = ((-2.4, -3.0, -0.21, -3.5), (2.4, 3.0, 0.21, 3.5))
 
 
 def test_cartpole_evolves_and_every_genome_sees_the_seeded_starts():
-    task = GymTask("CartPole-v1", observation_bounds=CARTPOLE_BOUNDS, max_steps=200)
+    task = GymTask("CartPole-v1", observation_bounds=CARTPOLE_BOUNDS, max_steps=200, adapter=True)  # not the port
     assert (task.observation_size, task.action_size, task.discrete, task.max_steps) == (4, 1, 2, 200)
     starts = task.reset(3, torch.Generator().manual_seed(5))
     for k in range(3):  # each episode's start is its seed's reset
