@@ -389,9 +389,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="GA settings: 'tuned' (default), each controller's own pick for the table, made on tuning "
                           "seeds; or one preset for both: neat-c++ (NEAT 2002 / NEAT C++) or neat-python (its defaults)")
     rep.add_argument("--coding", choices=("study", "signed"), default="study",
-                     help="double-pole studies only: how observations reach the networks: 'study' (default; [0, 1] "
-                          "over the study's bounds) or 'signed' (NEAT C++ 1.2.1's: x/4.8, x_dot/2, theta/0.52, "
-                          "theta_dot/2, centred and unclipped)")
+                     help="how observations reach the networks: 'study' (default: the paper's, or the double-pole "
+                          "study's: [0, 1] over the bounds) or 'signed' (double pole: NEAT C++ 1.2.1's x/4.8, x_dot/2, "
+                          "theta/0.52, theta_dot/2, centred and unclipped; tables: [-1, 1] over the paper's bounds, "
+                          "push-pull pairs for Bernoulli inputs; a sensitivity study)")
     rep.add_argument("--out", default=None, help="output folder (default: results/TABLE)")
     rep.add_argument("--resume", action="store_true", help="continue from the checkpoints in --out")
     rep.add_argument("--checkpoint-every", type=_positive_int, default=1, help="generations between checkpoints")

@@ -9,6 +9,7 @@ neat-python "full" start, reported as a sensitivity check.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 import torch
 from torch import Tensor
@@ -19,7 +20,7 @@ from evolution.population import Genomes
 from evolution.rollout import TaskFitness
 from tasks.cartpole import DEFAULT_PLANT, THETA0_RAD, CartPoleParams, CartPoleTask
 
-__all__ = ["PAPER_SPECS", "paper_task", "paper_spec", "paper_fitness", "CONTROLLERS", "GA_PRESETS", "GA_CHOICES", "TUNED_GA", "ga_overrides", "ga_choice", "describe_ga", "NONMARKOV", "MARKOV", "controller_config", "nonmarkov_start", "nonmarkov_fitness",
+__all__ = ["CODINGS", "PAPER_SPECS", "paper_task", "paper_spec", "paper_fitness", "CONTROLLERS", "GA_PRESETS", "GA_CHOICES", "TUNED_GA", "ga_overrides", "ga_choice", "describe_ga", "NONMARKOV", "MARKOV", "controller_config", "nonmarkov_start", "nonmarkov_fitness",
            "markov_config", "markov_fitness", "markov_start"]
 
 CONTROLLERS = ("snn", "sigmoid")
@@ -56,11 +57,23 @@ def paper_task(table: str, *, plant: CartPoleParams = DEFAULT_PLANT, max_steps: 
     raise ValueError(f"table must be 'table1' or 'table2', got {table!r}")
 
 
-def paper_spec(table: str, controller: str) -> SpikingSpec | SigmoidSpec:
-    """The coding of ``controller`` (``"snn"`` or ``"sigmoid"``) on ``table`` (``PAPER_SPECS``)."""
+CODINGS = ("study", "signed")
+
+
+def paper_spec(table: str, controller: str, coding: str = "study") -> SpikingSpec | SigmoidSpec:
+    """The coding of ``controller`` (``"snn"`` or ``"sigmoid"``) on ``table`` (``PAPER_SPECS``);
+    ``coding="signed"``: the same spec with the observations signed over the paper's bounds
+    (``evolution.input_coding``; push-pull pairs for the Bernoulli encoder, whose spike
+    probabilities cannot be negative), a sensitivity study, not the paper's coding."""
     if (table, controller) not in PAPER_SPECS:
         raise ValueError(f"no paper controller {controller!r} for {table!r}; controllers: {CONTROLLERS}")
-    return PAPER_SPECS[(table, controller)]
+    if coding not in CODINGS:
+        raise ValueError(f"coding must be one of {CODINGS}, got {coding!r}")
+    spec = PAPER_SPECS[(table, controller)]
+    if coding == "study":
+        return spec
+    bernoulli = isinstance(spec, SpikingSpec) and spec.encoder == "bernoulli"
+    return replace(spec, input_coding="push_pull" if bernoulli else "signed")
 
 
 # GA settings, as named presets over NEATConfig. "neat-c++": NEATConfig's defaults ([NEAT02],
@@ -123,8 +136,11 @@ def ga_overrides(ga: str) -> dict:
     return dict(GA_PRESETS[ga])
 
 
-def controller_config(controller: str, *, self_loops: bool = False, ga: str = "neat-c++", **overrides) -> NEATConfig:
-    """The NEAT config of a controller for the non-Markov task, under GA preset ``ga``."""
+def controller_config(controller: str, *, self_loops: bool = False, ga: str = "neat-c++", coding: str = "study",
+                      **overrides) -> NEATConfig:
+    """The NEAT config of a controller for the non-Markov task, under GA preset ``ga`` (``coding``:
+    ``paper_spec``'s; the signed coding keeps one input per variable here)."""
+    paper_spec("table2", controller if controller in CONTROLLERS else "snn", coding)  # checks the coding
     if controller == "snn":
         base = dict(num_inputs=2, num_outputs=1, num_bias=0, max_hidden=16, **SPIKING_SIGMA)
     elif controller == "sigmoid":
@@ -145,27 +161,32 @@ def nonmarkov_start(batch: int, *, device: str | torch.device = "cpu", dtype: to
 
 def nonmarkov_fitness(controller: str, config: NEATConfig, *, spec: SpikingSpec | SigmoidSpec | None = None,
                       plant: CartPoleParams = DEFAULT_PLANT, max_steps: int | None = None,
-                      backend: str = "auto") -> Callable[[Genomes], Tensor]:
+                      backend: str = "auto", coding: str = "study") -> Callable[[Genomes], Tensor]:
     """``fitness_fn(genomes) -> [R, P]``: control steps balanced on Table II's task (the paper's fitness)."""
-    return paper_fitness("table2", controller, config, spec=spec, plant=plant, max_steps=max_steps, backend=backend)
+    return paper_fitness("table2", controller, config, spec=spec, plant=plant, max_steps=max_steps, backend=backend,
+                         coding=coding)
 
 
 def paper_fitness(table: str, controller: str, config: NEATConfig, *, spec: SpikingSpec | SigmoidSpec | None = None,
                   plant: CartPoleParams = DEFAULT_PLANT, max_steps: int | None = None,
-                  backend: str = "auto") -> TaskFitness:
-    """``TaskFitness`` of ``controller`` on ``table``'s task with the paper's coding (``PAPER_SPECS``)."""
-    spec = paper_spec(table, controller) if spec is None else spec
+                  backend: str = "auto", coding: str = "study") -> TaskFitness:
+    """``TaskFitness`` of ``controller`` on ``table``'s task with the paper's coding (``PAPER_SPECS``,
+    or its signed variant: ``paper_spec``)."""
+    spec = paper_spec(table, controller, coding) if spec is None else spec
     return TaskFitness(paper_task(table, plant=plant, max_steps=max_steps), config, controller, spec, backend=backend)
 
 
-def markov_config(controller: str, *, self_loops: bool = False, ga: str = "neat-c++", **overrides) -> NEATConfig:
+def markov_config(controller: str, *, self_loops: bool = False, ga: str = "neat-c++", coding: str = "study",
+                  **overrides) -> NEATConfig:
     """The NEAT config of a controller for the Markov task (four inputs, bang-bang output).
 
     The start genome is the paper's: the four inputs wired to the output (plus the bias input
     for sigmoid NEAT). NEAT-SNN has no sigma here (the force is bang-bang), so sigma is frozen
     and left out of the distance.
     """
-    base = dict(num_inputs=4, sigma_mutate_rate=0.0, compatibility_sigma_coefficient=0.0)
+    spec = paper_spec("table1", controller if controller in CONTROLLERS else "snn", coding)
+    inputs = 8 if spec.input_coding == "push_pull" else 4  # two input nodes per variable under push-pull
+    base = dict(num_inputs=inputs, sigma_mutate_rate=0.0, compatibility_sigma_coefficient=0.0)
     if controller == "snn":
         base.update(num_bias=0)
     base.update(overrides)
@@ -179,6 +200,7 @@ def markov_start(batch: int, *, device: str | torch.device = "cpu", dtype: torch
 
 def markov_fitness(controller: str, config: NEATConfig, *, spec: SpikingSpec | SigmoidSpec | None = None,
                    plant: CartPoleParams = DEFAULT_PLANT, max_steps: int | None = None,
-                   backend: str = "auto") -> Callable[[Genomes], Tensor]:
+                   backend: str = "auto", coding: str = "study") -> Callable[[Genomes], Tensor]:
     """``fitness_fn(genomes) -> [R, P]``: control steps balanced on the Markov task (Table I)."""
-    return paper_fitness("table1", controller, config, spec=spec, plant=plant, max_steps=max_steps, backend=backend)
+    return paper_fitness("table1", controller, config, spec=spec, plant=plant, max_steps=max_steps, backend=backend,
+                         coding=coding)

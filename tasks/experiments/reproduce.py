@@ -123,7 +123,8 @@ class ControllerRuns:
         return {"controller": self.controller, "best": min(counted), "worst": max(counted),
                 "median": statistics.median(counted), "mean": statistics.mean(counted),
                 "failures": failures, "runs": len(counted), "failure_rate": f"{failures}/{len(counted)}",
-                "wall_s": self.wall_s, "ga": self.extra.get("ga", "")}
+                "wall_s": self.wall_s, "ga": self.extra.get("ga", ""),
+                **({"coding": self.extra["coding"]} if self.extra.get("coding", "study") != "study" else {})}
 
 
 def _progress(total: int, initial: int, desc: str, enabled: bool):
@@ -151,17 +152,14 @@ def study_config(task_name: str, controller: str, *, self_loops: bool = False, g
 
 
 def _coding_kwargs(task_name: str, coding: str) -> dict:
-    """``{"coding": coding}`` for the double-pole studies (none for their default), checked."""
-    from tasks.experiments.double_pole import CODINGS, VARIANTS
+    """``{"coding": coding}`` for a coding other than the study's own (none for the default), checked:
+    ``"signed"`` is NEAT C++ 1.2.1's coding on the double pole, the paper's bounds signed on its
+    tables (``tasks.experiments.cartpole.paper_spec``), a sensitivity study there."""
+    from tasks.experiments.double_pole import CODINGS
 
     if coding not in CODINGS:
         raise ReproduceError(f"coding must be one of {CODINGS}, got {coding!r}")
-    if coding == "study":
-        return {}
-    if task_name not in VARIANTS:
-        raise ReproduceError(f"--coding {coding} applies to the double-pole studies {VARIANTS}; the paper's tables "
-                             f"keep the paper's coding")
-    return {"coding": coding}
+    return {} if coding == "study" else {"coding": coding}
 
 
 def run_controller(task_name: str, controller: str, seeds: list[int], generations: int, out: str | os.PathLike,
@@ -316,6 +314,10 @@ def format_markdown(summary: dict, seeds: list[int], command: str) -> str:
     ga = [f"{LABELS.get(c, c)}: {row['ga']}" for c, row in summary["rows"].items() if row.get("ga")]
     if ga:
         lines.append("GA settings (tasks/experiments/cartpole.py, GA_PRESETS and TUNED_GA): " + "; ".join(ga) + ".")
+    if any(row.get("coding") == "signed" for row in summary["rows"].values()):
+        lines.append("Input coding: signed (`--coding signed`, a sensitivity study, not the paper's): each observation "
+                     "in [-1, 1] over the paper's bounds, centred; the Bernoulli encoder's as push-pull pairs of input "
+                     "neurons (tasks/experiments/cartpole.py, paper_spec).")
     if "mann_whitney_u" in summary:
         mw = summary["mann_whitney_u"]
         p = mw["p_value"]

@@ -105,8 +105,8 @@ def test_reproduce_with_the_signed_coding_records_it_and_resumes_only_with_it(tm
     md = (out / "dpv.md").read_text()
     assert "Input coding: signed, as NEAT C++ 1.2.1 feeds its networks" in md and "4.8, 2, 0.52, 2, 0.52, 2" in md
     assert json.loads((out / "summary.json").read_text())["rows"]["sigmoid"]["coding"] == "signed"
-    with pytest.raises(ReproduceError, match="--coding signed applies to the double-pole studies"):
-        run_controller("table2", "sigmoid", [0], 1, tmp_path / "t2", progress=False, coding="signed")
+    with pytest.raises(ReproduceError, match=r"coding must be one of \('study', 'signed'\)"):
+        run_controller("table2", "sigmoid", [0], 1, tmp_path / "t2", progress=False, coding="unit")
 
 
 def test_evaluations_are_also_counted_as_neat_121_counts_them(tmp_path):

@@ -14,7 +14,13 @@ import torch
 
 from evolution.checkpoint import load_checkpoint_dict
 from tasks.cli import main
-from tasks.experiments.reproduce import ControllerRuns, ReproduceError, mann_whitney, run_controller
+from tasks.experiments.reproduce import (
+    ControllerRuns,
+    ReproduceError,
+    mann_whitney,
+    run_controller,
+    write_report,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -198,3 +204,24 @@ def test_results_do_not_depend_on_a_c_compiler(tmp_path):
         if name == "no compiler":
             assert "torch path" in proc.stderr  # the fallback says so
     assert outputs[0] == outputs[1] == outputs[2]
+
+
+def test_the_tables_signed_coding_is_a_sensitivity_study_of_the_same_runs(tmp_path):
+    """`--coding signed` on the paper's tables: the paper's specs with signed inputs (push-pull
+    pairs for Table I's Bernoulli encoder, so twice the input nodes), recorded in the report."""
+    from tasks.experiments.cartpole import markov_config, paper_spec
+    from tasks.experiments.reproduce import study_config
+
+    assert paper_spec("table2", "snn", "signed").input_coding == "signed"
+    assert paper_spec("table1", "snn", "signed").input_coding == "push_pull"
+    assert paper_spec("table1", "sigmoid", "signed").input_coding == "signed"
+    assert paper_spec("table2", "snn") == paper_spec("table2", "snn", "study")
+    assert markov_config("snn", coding="signed").num_inputs == 8 and markov_config("sigmoid", coding="signed").num_inputs == 4
+    assert study_config("table1", "snn", coding="signed").num_inputs == 8
+    signed = run_controller("table2", "sigmoid", [0, 1], 3, tmp_path / "signed", progress=False, coding="signed")
+    paper = run_controller("table2", "sigmoid", [0, 1], 3, tmp_path / "paper", progress=False)
+    assert signed.extra["coding"] == "signed" and not torch.equal(signed.history, paper.history)
+    write_report({"sigmoid": signed}, "table2", tmp_path / "signed", command="test", generalization=False)
+    assert "Input coding: signed (`--coding signed`, a sensitivity study" in (tmp_path / "signed" / "table2.md").read_text()
+    with pytest.raises(ReproduceError, match="cannot resume .* coding='signed', this call asks for coding='study'"):
+        run_controller("table2", "sigmoid", [0, 1], 3, tmp_path / "signed", progress=False, resume=True)
