@@ -251,7 +251,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     command = _command_line(args)
     results = {}
     common = dict(resume=args.resume, self_loops=args.self_loops, ga=args.ga, checkpoint_every=args.checkpoint_every,
-                  device=args.device, progress=not args.quiet, coding=args.coding)
+                  device=args.device, progress=not args.quiet, coding=args.coding, champion_test=args.champion_test)
     with OutputLock(args.out, command):
         _clean(args.out)
         if args.resume and not _reproduce_checkpoints(args):
@@ -393,6 +393,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "study's: [0, 1] over the bounds) or 'signed' (double pole: NEAT C++ 1.2.1's x/4.8, x_dot/2, "
                           "theta/0.52, theta_dot/2, centred and unclipped; tables: [-1, 1] over the paper's bounds, "
                           "push-pull pairs for Bernoulli inputs; a sensitivity study)")
+    rep.add_argument("--champion-test", choices=("champion", "species"), default="champion",
+                     help="dpnv only: the test of a generation: each run's overall champion (default), or NEAT C++ "
+                          "1.2.1's champion of the best species not tested since it last improved")
     rep.add_argument("--out", default=None, help="output folder (default: results/TABLE)")
     rep.add_argument("--resume", action="store_true", help="continue from the checkpoints in --out")
     rep.add_argument("--checkpoint-every", type=_positive_int, default=1, help="generations between checkpoints")

@@ -266,13 +266,23 @@ def champion_solves(genomes, fitness: Tensor, config, kind: str = "snn", spec=No
     ``min_general`` or more of the 625 generalisation starts for 1000 steps. ``[R, P]`` bool,
     true at the solving champions."""
     best = fitness.argmax(-1, keepdim=True)  # [R, 1]
-    champions = genomes.gather(best)
+    solved = champions_pass(genomes.gather(best), config, kind, spec, velocities=velocities, long_steps=long_steps,
+                            min_general=min_general, task=task)
+    out = torch.zeros(fitness.shape, dtype=torch.bool, device=fitness.device)
+    return out.scatter(1, best, solved.unsqueeze(1))
+
+
+def champions_pass(champions, config, kind: str = "snn", spec=None, *, velocities: bool = False,
+                   long_steps: int = LONG_BALANCE_STEPS, min_general: int = GENERALIZATION_PASS,
+                   task: DoublePoleTask | None = None) -> Tensor:
+    """NEAT 2002's test of one genome per run (``champions`` ``[R, 1]``): ``[R]`` bool, true where it
+    balances ``long_steps`` steps from the standard start and ``min_general`` or more of the 625
+    generalisation starts for 1000 steps (the 625 only for those that passed the first)."""
     long = balanced_steps(champions, config, kind, spec, velocities=velocities, max_steps=long_steps,
                           task=task)[:, 0, 0]
     solved = long >= long_steps
-    if bool(solved.any()):  # the 625-start test only for champions that passed the long balance
+    if bool(solved.any()):
         general = (balanced_steps(champions, config, kind, spec, velocities=velocities,
                                   starts=generalization_starts(), task=task) >= GENERALIZATION_STEPS).sum(-1)[:, 0]
         solved = solved & (general >= min_general)
-    out = torch.zeros(fitness.shape, dtype=torch.bool, device=fitness.device)
-    return out.scatter(1, best, solved.unsqueeze(1))
+    return solved

@@ -27,16 +27,23 @@ import math
 from collections.abc import Callable
 from dataclasses import replace
 
+import torch
 from torch import Tensor
 
 from evolution.config import NEATConfig
 from evolution.phenotype import SPIKING_SIGMA, SigmoidSpec, SpikingSpec, network_inputs
 from evolution.population import Genomes
 from evolution.rollout import TaskFitness
-from tasks.double_pole import GENERALIZATION_PASS, LONG_BALANCE_STEPS, DoublePoleTask, champion_solves
+from tasks.double_pole import (
+    GENERALIZATION_PASS,
+    LONG_BALANCE_STEPS,
+    DoublePoleTask,
+    champion_solves,
+    champions_pass,
+)
 from tasks.experiments.cartpole import CONTROLLERS, ga_choice, ga_overrides
 
-__all__ = ["VARIANTS", "CODINGS", "NEAT121_SCALES", "POPULATION", "OBSERVATION_BOUNDS", "PUBLISHED", "study_task", "study_spec", "study_config",
+__all__ = ["SpeciesChampionTest", "species_champion_test", "VARIANTS", "CODINGS", "NEAT121_SCALES", "POPULATION", "OBSERVATION_BOUNDS", "PUBLISHED", "study_task", "study_spec", "study_config",
            "study_fitness", "study_solved"]
 
 VARIANTS = ("dpv", "dpnv")
@@ -140,14 +147,78 @@ def study_fitness(variant: str, controller: str, config: NEATConfig, coding: str
     return TaskFitness(study_task(variant, coding), config, controller, study_spec(variant, controller, coding))
 
 
+class SpeciesChampionTest:
+    """NEAT C++ 1.2.1's DPNV test of a generation, as a ``solved_fn(genomes, fitness) -> [R, P]`` of one
+    ``NEAT``: in each unsolved run, the champion of the best species (by its best fitness this
+    generation) that has not been tested since it last improved is tested (``champions_pass``);
+    one test per run and generation at most. A species counts as improved when its best fitness
+    this generation exceeds the one it had when it was last tested. The test of the overall
+    champion (``champion_solves``) instead retests the same genome while it stays the best.
+
+    The record of tested species is state: ``state_dict()`` / ``load_state_dict()`` carry it
+    through a checkpoint, so a resumed run tests what it would have.
+    """
+
+    def __init__(self, neat, test: Callable[[Genomes], Tensor]) -> None:
+        self.neat, self.test = neat, test
+        self.tested: list[dict[int, float]] = [{} for _ in range(neat.num_runs)]
+
+    def __call__(self, genomes: Genomes, fitness: Tensor) -> Tensor:
+        neat = self.neat
+        runs = torch.nonzero(neat.active_runs).flatten().tolist()  # the rows NEAT.solved_active passes
+        if len(runs) != genomes.num_runs:
+            raise ValueError(f"SpeciesChampionTest got {genomes.num_runs} runs, its NEAT has {len(runs)} unsolved")
+        picks = torch.zeros(len(runs), 1, dtype=torch.long)
+        chosen = torch.zeros(len(runs), dtype=torch.bool)
+        for row, r in enumerate(runs):
+            slot, f = neat.species[r].cpu(), fitness[row].detach().cpu().to(torch.float64)
+            S = int(neat.species_state.ident.shape[1])
+            best = torch.full((S,), -math.inf, dtype=torch.float64).scatter_reduce(0, slot, f, "amax")
+            ident = neat.species_state.ident[r].cpu().tolist()
+            order = sorted((s for s in set(slot.tolist())), key=lambda s: (-float(best[s]), s))
+            for s in order:  # the best species first; the first one not tested since it improved
+                seen = self.tested[r].get(ident[s])
+                if seen is None or float(best[s]) > seen:
+                    members = torch.nonzero((slot == s) & (f == best[s])).flatten()
+                    picks[row, 0], chosen[row] = int(members[0]), True
+                    self.tested[r][ident[s]] = float(best[s])
+                    break
+        out = torch.zeros(fitness.shape, dtype=torch.bool, device=fitness.device)
+        if bool(chosen.any()):
+            passed = self.test(genomes.gather(picks.to(genomes.device))).cpu() & chosen
+            out = out.scatter(1, picks.to(out.device), passed.to(out.device).unsqueeze(1))
+        return out
+
+    def state_dict(self) -> dict:
+        return {"tested": [{int(k): float(v) for k, v in d.items()} for d in self.tested]}
+
+    def load_state_dict(self, state: dict) -> None:
+        tested = state.get("tested") if isinstance(state, dict) else None
+        if not isinstance(tested, list) or len(tested) != self.neat.num_runs:
+            raise ValueError(f"SpeciesChampionTest state must list {self.neat.num_runs} runs' tested species")
+        self.tested = [{int(k): float(v) for k, v in d.items()} for d in tested]
+
+
+def species_champion_test(variant: str, controller: str, config: NEATConfig, neat,
+                          coding: str = "study") -> SpeciesChampionTest:
+    """NEAT C++ 1.2.1's test of a DPNV generation for ``neat``'s runs (``SpeciesChampionTest``)."""
+    task, spec = study_task(variant, coding), study_spec(variant, controller, coding)
+    return SpeciesChampionTest(neat, lambda champions: champions_pass(champions, config, controller, spec,
+                                                                      min_general=GENERALIZATION_PASS, task=task))
+
+
 def study_solved(variant: str, controller: str, config: NEATConfig,
-                 coding: str = "study") -> Callable[[Genomes, Tensor], Tensor] | None:
+                 coding: str = "study", *, neat=None) -> Callable[[Genomes, Tensor], Tensor] | None:
     """NEAT 2002's test of a generation as a ``solved_fn(genomes, fitness) -> [R, P]``, or None
-    where the fitness threshold decides (DPV: a genome balanced the whole 100,000 steps)."""
+    where the fitness threshold decides (DPV: a genome balanced the whole 100,000 steps). DPNV:
+    the overall champion of each generation, or with ``neat`` NEAT C++ 1.2.1's choice of the
+    champion to test (``species_champion_test``)."""
     _check(variant, controller, coding)
     if variant == "dpv":
         return None
     task, spec = study_task(variant, coding), study_spec(variant, controller, coding)
+    if neat is not None:
+        return species_champion_test(variant, controller, config, neat, coding)
 
     def solved(genomes: Genomes, fitness: Tensor) -> Tensor:
         return champion_solves(genomes, fitness, config, controller, spec, min_general=GENERALIZATION_PASS, task=task)

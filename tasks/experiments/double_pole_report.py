@@ -76,6 +76,8 @@ def study_rows(results: dict[str, ControllerRuns], variant: str, *, generalizati
                "evaluations_neat121_median_solved": statistics.median(neat121_solved) if neat121_solved else math.nan}
         if r.extra.get("coding", "study") != "study":
             row["coding"] = r.extra["coding"]
+        if r.extra.get("champion_test", "champion") != "champion":
+            row["champion_test"] = r.extra["champion_test"]
         for key, values in (("hidden_nodes", hidden), ("connections", conns), *(
                 (k, tests[k]) for k in ("generalization", "generalization_static_map") if k in tests)):
             row[f"{key}_mean_all"] = _mean(values)
@@ -133,6 +135,9 @@ def format_study_markdown(summary: dict, command: str) -> str:
                      f"| | | {p.get('failures', '')} | {p.get('generalization', '-')} | {_fmt(p.get('neat121_mean'))} | "
                      f"{_fmt(p.get('neat121_median'))} |")
     budget = next(iter(summary["rows"].values()))["generations"]
+    if any(row.get("champion_test") == "species" for row in summary["rows"].values()):
+        lines += ["", "Test of a generation: NEAT C++ 1.2.1's, the champion of the best species not tested since it "
+                  "last improved, one per run and generation (`--champion-test species`)."]
     if any(row.get("coding") == "signed" for row in summary["rows"].values()):
         scales = ", ".join(f"{v:g}" for v in NEAT121_SCALES[variant])
         lines += ["", f"Input coding: signed, as NEAT C++ 1.2.1 feeds its networks: each observed variable divided by "

@@ -24,7 +24,7 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
-from evolution.checkpoint import atomic_torch_save, load_checkpoint_dict
+from evolution.checkpoint import CheckpointError, atomic_torch_save, load_checkpoint_dict
 from evolution.config import NEATConfig
 from evolution.neat import NEAT
 from evolution.population import Genomes
@@ -86,7 +86,8 @@ def _tasks() -> dict[str, Task]:
 
 
 TASKS = ("table1", "table2", "dpv", "dpnv")
-IDENTITY_DEFAULTS = {"coding": "study"}  # a checkpoint written before the key existed had this value
+IDENTITY_DEFAULTS = {"coding": "study", "champion_test": "champion"}  # checkpoints from before the key: this value
+CHAMPION_TESTS = ("champion", "species")
 # Fig. 8 draws solved runs' final best up to the budget, or this many generations where the
 # budget is larger (evolution itself may go on longer; its generations are all drawn).
 FIG8_MAX_PAD = 10_000
@@ -165,7 +166,8 @@ def _coding_kwargs(task_name: str, coding: str) -> dict:
 def run_controller(task_name: str, controller: str, seeds: list[int], generations: int, out: str | os.PathLike,
                    *, resume: bool = False, self_loops: bool = False, ga: str = "tuned", checkpoint_every: int = 1,
                    device: str | torch.device = "cpu", progress: bool = True,
-                   stop_after: int | None = None, coding: str = "study") -> ControllerRuns:
+                   stop_after: int | None = None, coding: str = "study",
+                   champion_test: str = "champion") -> ControllerRuns:
     """Evolve ``controller`` on ``task_name`` for each seed (one batch), checkpointing to ``out``.
 
     ``resume`` continues from ``OUT/<controller>.ckpt`` (which must have been written with
@@ -173,8 +175,11 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
     error, so a finished reproduction is never overwritten by accident. ``ga``: a GA preset of
     ``tasks.experiments.cartpole.GA_PRESETS``, or ``"tuned"`` (default), the controller's own
     pick for the table (``TUNED_GA``). ``coding``: the double-pole studies' input coding
-    (``"study"``, or ``"signed"``: NEAT 1.2.1's). ``stop_after`` (generations in this call)
-    exists for tests of interruption.
+    (``"study"``, or ``"signed"``: NEAT 1.2.1's). ``champion_test``: DPNV's test of a
+    generation, ``"champion"`` (each run's overall champion, every generation) or ``"species"``
+    (NEAT C++ 1.2.1's: the champion of the best species not tested since it improved; its record
+    is kept in the checkpoint). ``stop_after`` (generations in this call) exists for tests of
+    interruption.
     """
     from tasks.experiments.cartpole import describe_ga, ga_choice
 
@@ -193,8 +198,11 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"{controller}.ckpt"
     coding_kwargs = _coding_kwargs(task_name, coding)
+    if champion_test not in CHAMPION_TESTS or (champion_test != "champion" and task_name != "dpnv"):
+        raise ReproduceError(f"champion_test must be one of {CHAMPION_TESTS} ('species' only for dpnv), got "
+                             f"{champion_test!r} for {task_name}")
     identity = {"task": task_name, "controller": controller, "seeds": list(seeds), "generations": generations,
-                "self_loops": self_loops, "ga": ga_text, "coding": coding}
+                "self_loops": self_loops, "ga": ga_text, "coding": coding, "champion_test": champion_test}
     if path.exists():
         if not resume:
             raise ReproduceError(f"{path} exists: pass --resume to continue it, or choose another --out")
@@ -207,19 +215,29 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
                                      f"this call asks for {key}={value!r}")
         neat, history, wall = _resumed(path, data, device)
         config = neat.config
+        solved_state = data.get("solved_state")
     else:
         config = study_config(task_name, controller, self_loops=self_loops, ga=ga, coding=coding)
         neat = NEAT(config, seeds=seeds, device=device)
-        history, wall = [], 0.0
+        history, wall, solved_state = [], 0.0, None
 
     fitness_fn = task.fitness(controller, config, **coding_kwargs)
-    solved_fn = task.solved(controller, config, **coding_kwargs) if task.solved is not None else None
+    solved_fn = None
+    if task.solved is not None:
+        species = {"neat": neat} if champion_test == "species" else {}
+        solved_fn = task.solved(controller, config, **coding_kwargs, **species)
+    if solved_state is not None and hasattr(solved_fn, "load_state_dict"):
+        try:
+            solved_fn.load_state_dict(solved_state)
+        except ValueError as exc:
+            raise CheckpointError(f"checkpoint {str(path)!r} is malformed: {exc}") from None
 
     def save() -> None:
         stacked = torch.stack(history) if history else torch.zeros(0, len(seeds), dtype=torch.float64)
         state = neat.state_dict()
-        atomic_torch_save({"format": state["format"], "version": state["version"], "identity": identity, "neat": state, "history": stacked,
-                           "wall_s": wall}, path)
+        extra = {"solved_state": solved_fn.state_dict()} if hasattr(solved_fn, "state_dict") else {}
+        atomic_torch_save({"format": state["format"], "version": state["version"], "identity": identity, "neat": state,
+                           "history": stacked, "wall_s": wall, **extra}, path)
 
     bar = _progress(generations, neat.generation, f"{task_name} {controller}", progress)
     done_here = 0
@@ -255,7 +273,7 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
                           best_fitness=neat.best_fitness.cpu().tolist(), history=hist,
                           champions=neat.best_genomes.to("cpu"), config=config, wall_s=wall,
                           extra={"complete": neat.generation >= generations or not bool(neat.active_runs.any()),
-                                 "ga": ga_text, "coding": coding,
+                                 "ga": ga_text, "coding": coding, "champion_test": champion_test,
                                  "solved_position": neat.solved_position.cpu().tolist()})
 
 

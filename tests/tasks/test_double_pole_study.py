@@ -7,6 +7,7 @@ import pytest
 import torch
 
 from evolution import NEAT
+from evolution.checkpoint import load_checkpoint_dict
 from tasks.double_pole import LONG_BALANCE_STEPS
 from tasks.experiments.double_pole import (
     OBSERVATION_BOUNDS,
@@ -135,3 +136,59 @@ def test_evaluations_are_also_counted_as_neat_121_counts_them(tmp_path):
     assert neat121_evaluations(r) == [None, 304]
     md_rows = study_rows({"sigmoid": r}, "dpv", generalization=False)["rows"]["sigmoid"]
     assert md_rows["evaluations_neat121_mean_solved"] == 304
+
+
+def test_neat_121s_test_takes_the_best_species_not_tested_since_it_improved():
+    """One champion per run and generation: the best species' first, then, while it does not
+    improve, the next species' champion; a species that improves is tested again."""
+    from tasks.experiments.double_pole import SpeciesChampionTest
+
+    cfg = study_config("dpnv", "sigmoid", pop_size=6)
+    neat = NEAT(cfg, seeds=[0, 1])
+    S = neat.species_state.ident.shape[1]
+    neat.species = torch.tensor([[0, 0, 1, 1, 2, 2], [0, 0, 0, 0, 0, 0]])
+    neat.species_state.ident[:] = torch.arange(S) + 10
+    tested = []
+
+    def test(champions):  # records the champions' first weights; only run 1's passes
+        tested.append(champions.weight[:, 0].clone())
+        return torch.tensor([False, True])
+
+    check = SpeciesChampionTest(neat, test)
+    genomes = neat.ask()
+    genomes.weight[:, :, 0, 3] = torch.arange(6, dtype=genomes.weight.dtype)  # a genome's mark: its index
+    f = torch.tensor([[0.1, 0.5, 0.7, 0.2, 0.3, 0.3], [0.2, 0.9, 0.1, 0.9, 0.0, 0.0]], dtype=torch.float64)
+    out = check(genomes, f)
+    assert tested[-1][:, 0, 3].tolist() == [2.0, 1.0]  # species 1's champion; run 1: the first of two best
+    assert out.tolist() == [[False] * 6, [False, True, False, False, False, False]]
+    check(genomes, f)  # nothing improved: run 0 tests species 0's champion (0.5) next
+    assert tested[-1][0, 0, 3] == 1.0
+    check(genomes, f)  # then species 2's first best
+    assert tested[-1][0, 0, 3] == 4.0
+    f2 = f.clone()
+    f2[0, 3] = 0.8  # species 1 improves: tested again, its new champion
+    check(genomes, f2)
+    assert tested[-1][0, 0, 3] == 3.0
+    state = check.state_dict()
+    again = SpeciesChampionTest(neat, test)
+    again.load_state_dict(state)
+    assert again.tested == check.tested
+    with pytest.raises(ValueError, match="must list 2 runs"):
+        again.load_state_dict({"tested": []})
+
+
+def test_reproduce_dpnv_with_neat_121s_test_resumes_to_the_same_bits(tmp_path):
+    straight = run_controller("dpnv", "sigmoid", [0, 1], 3, tmp_path / "straight", progress=False,
+                              champion_test="species")
+    run_controller("dpnv", "sigmoid", [0, 1], 3, tmp_path / "split", progress=False, champion_test="species",
+                   stop_after=1)
+    saved = load_checkpoint_dict(tmp_path / "split" / "sigmoid.ckpt")
+    assert len(saved["solved_state"]["tested"]) == 2 and all(saved["solved_state"]["tested"])  # a species each
+    resumed = run_controller("dpnv", "sigmoid", [0, 1], 3, tmp_path / "split", progress=False,
+                             champion_test="species", resume=True)
+    assert torch.equal(resumed.history, straight.history) and resumed.solved_generation == straight.solved_generation
+    assert resumed.extra["champion_test"] == "species"
+    with pytest.raises(ReproduceError, match="champion_test='species', this call asks for champion_test='champion'"):
+        run_controller("dpnv", "sigmoid", [0, 1], 3, tmp_path / "split", progress=False, resume=True)
+    with pytest.raises(ReproduceError, match="'species' only for dpnv"):
+        run_controller("dpv", "sigmoid", [0], 1, tmp_path / "dpv", progress=False, champion_test="species")
