@@ -361,7 +361,8 @@ def _record_episode(r: ControllerRuns, task: str, run: int) -> tuple[dict, float
     one = r.champions.select_runs([run])
     steps = None if task == "table2" else MARKOV_RECORD_STEPS
     plant_task = cp.paper_task(task, max_steps=steps)
-    controller = make_controller(one, r.config, plant_task, cp.paper_spec(task, r.controller), kind=r.controller)
+    spec = cp.paper_spec(task, r.controller, r.extra.get("coding", "study"))  # the coding it evolved with
+    controller = make_controller(one, r.config, plant_task, spec, kind=r.controller)
     trace = rollout(plant_task, controller, record=True).trace
     state = trace["state"][:, 0]
     out = {"x": state[:, 0], "theta": state[:, 2], "force": trace["action"][:, 0, 0],
@@ -377,9 +378,11 @@ def _example_run(r: ControllerRuns) -> int:
 
 
 def _generalization(r: ControllerRuns) -> list[float]:
+    from tasks.experiments.cartpole import paper_spec
     from tasks.generalization import success_rate
 
-    rate = success_rate(r.champions, r.config, controller=r.controller)  # [R, 1]
+    spec = paper_spec("table2", r.controller, r.extra.get("coding", "study"))  # the coding it evolved with
+    rate = success_rate(r.champions, r.config, controller=r.controller, spec=spec)  # [R, 1]
     return rate[:, 0].tolist()
 
 

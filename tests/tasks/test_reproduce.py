@@ -221,7 +221,13 @@ def test_the_tables_signed_coding_is_a_sensitivity_study_of_the_same_runs(tmp_pa
     signed = run_controller("table2", "sigmoid", [0, 1], 3, tmp_path / "signed", progress=False, coding="signed")
     paper = run_controller("table2", "sigmoid", [0, 1], 3, tmp_path / "paper", progress=False)
     assert signed.extra["coding"] == "signed" and not torch.equal(signed.history, paper.history)
-    write_report({"sigmoid": signed}, "table2", tmp_path / "signed", command="test", generalization=False)
+    write_report({"sigmoid": signed}, "table2", tmp_path / "signed", command="test", generalization=True)
+    from tasks.generalization import success_rate
+
+    expected = success_rate(signed.champions, signed.config, controller="sigmoid",
+                            spec=paper_spec("table2", "sigmoid", "signed"))[:, 0].tolist()
+    unit = success_rate(signed.champions, signed.config, controller="sigmoid")[:, 0].tolist()
+    assert signed.extra["generalization"] == expected != unit  # the champions tested with their own coding
     assert "Input coding: signed (`--coding signed`, a sensitivity study" in (tmp_path / "signed" / "table2.md").read_text()
     with pytest.raises(ReproduceError, match="cannot resume .* coding='signed', this call asks for coding='study'"):
         run_controller("table2", "sigmoid", [0, 1], 3, tmp_path / "signed", progress=False, resume=True)
