@@ -27,6 +27,8 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from snn_torch.functional.scalars import scalars
+
 __all__ = ["INPUT_CODINGS", "CODING_CODES", "inputs_per_observation", "check_coding", "coding_constants",
            "code_observations", "input_coding_of"]
 
@@ -69,11 +71,11 @@ def coding_constants(low: Tensor, high: Tensor, coding: str) -> tuple[Tensor, Te
 def code_observations(obs: Tensor, offset: Tensor, scale: Tensor, coding: str, clip: bool) -> Tensor:
     """``[B, observations]`` observations in ``offset``'s dtype -> ``[B, inputs]`` network inputs."""
     x = (obs - offset) / scale
-    zero = torch.zeros((), dtype=x.dtype, device=x.device)
+    zero, one, minus_one = scalars((0.0, 1.0, -1.0), x)  # cached 0-dim tensors: no allocation per control step
     if coding == "unit":
-        return torch.clamp(x, zero, torch.ones((), dtype=x.dtype, device=x.device))
+        return torch.clamp(x, zero, one)
     if clip:
-        x = torch.clamp(x, -1.0, 1.0)
+        x = torch.clamp(x, minus_one, one)
     if coding == "signed":
         return x
     return torch.stack([torch.where(x > 0, x, zero), torch.where(x < 0, -x, zero)], -1).flatten(1)

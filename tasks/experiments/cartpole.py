@@ -140,7 +140,8 @@ def controller_config(controller: str, *, self_loops: bool = False, ga: str = "n
                       **overrides) -> NEATConfig:
     """The NEAT config of a controller for the non-Markov task, under GA preset ``ga`` (``coding``:
     ``paper_spec``'s; the signed coding keeps one input per variable here)."""
-    paper_spec("table2", controller if controller in CONTROLLERS else "snn", coding)  # checks the coding
+    if coding not in CODINGS:
+        raise ValueError(f"coding must be one of {CODINGS}, got {coding!r}")
     if controller == "snn":
         base = dict(num_inputs=2, num_outputs=1, num_bias=0, max_hidden=16, **SPIKING_SIGMA)
     elif controller == "sigmoid":
@@ -184,8 +185,8 @@ def markov_config(controller: str, *, self_loops: bool = False, ga: str = "neat-
     for sigmoid NEAT). NEAT-SNN has no sigma here (the force is bang-bang), so sigma is frozen
     and left out of the distance.
     """
-    spec = paper_spec("table1", controller if controller in CONTROLLERS else "snn", coding)
-    inputs = 8 if spec.input_coding == "push_pull" else 4  # two input nodes per variable under push-pull
+    push_pull = controller == "snn" and coding == "signed"  # paper_spec: Bernoulli inputs as push-pull pairs
+    inputs = 8 if push_pull else 4  # two input nodes per variable under push-pull
     base = dict(num_inputs=inputs, sigma_mutate_rate=0.0, compatibility_sigma_coefficient=0.0)
     if controller == "snn":
         base.update(num_bias=0)
