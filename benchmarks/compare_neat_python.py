@@ -55,7 +55,7 @@ TASK = CartPoleTask.nonmarkov(plant=NO_FAIL)
 
 def ours(kind: str, genomes: Genomes, cfg: NEATConfig, steps: int, backend: str = "auto") -> float:
     """Seconds for one episode of every genome through the task seam (``evolution.rollout``)."""
-    controller = make_controller(genomes, cfg, TASK, kind=kind, backend=backend)
+    controller = make_controller(genomes, cfg, TASK, kind, backend=backend)
     t0 = time.perf_counter()
     done = rollout(TASK, controller, max_steps=steps).steps
     elapsed = time.perf_counter() - t0

@@ -36,8 +36,8 @@ from pathlib import Path
 
 import torch
 
-from tasks.experiments.distributed import run_controllers_on_ray
-from tasks.experiments.reproduce import run_controller
+from tasks.studies.distributed import run_controllers_on_ray
+from tasks.studies.reproduce import run_controller
 
 
 def _same(a, b) -> bool:

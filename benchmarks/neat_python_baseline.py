@@ -158,7 +158,7 @@ def compare(neat_python: list[int], runs_csv: list[str]) -> None:
     """Our sigmoid NEAT's runs (from ``runs.csv`` files) against neat-python's, U-tested."""
     import csv
 
-    from tasks.experiments.reproduce import mann_whitney
+    from tasks.studies.results import mann_whitney
 
     ours = []
     for path in runs_csv:

@@ -34,8 +34,8 @@ import torch
 
 from evolution.weight_search import FixedTopologyProblem
 from tasks.cartpole import CartPoleTask
-from tasks.experiments.cartpole import controller_config
-from tasks.generalization import start_grid
+from tasks.studies.cartpole import controller_config
+from tasks.studies.generalization import start_grid
 
 
 def _problem(starts: int, max_steps: int) -> FixedTopologyProblem:

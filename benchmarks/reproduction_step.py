@@ -29,7 +29,7 @@ import time
 import torch
 
 from evolution.neat import NEAT
-from tasks.xor import XOR_CONFIG
+from tasks.studies.xor import XOR_CONFIG
 
 
 def _fitness(neat: NEAT, seed: int) -> torch.Tensor:
@@ -151,12 +151,12 @@ survival_threshold = 0.2
 
 def generation_share(controller: str, generations: int) -> None:
     """Per generation: evaluation seconds, breeding seconds and breeding's share, Table II's task."""
-    from tasks.experiments.cartpole import controller_config, describe_ga, ga_choice, nonmarkov_fitness
+    from tasks.studies.registry import STUDIES, describe_ga
 
-    preset, extra = ga_choice("table2", controller)
-    cfg = controller_config(controller, ga=preset, **extra)
+    preset, extra = STUDIES["table2"].ga_choice(controller)
+    cfg = STUDIES["table2"].config(controller)
     neat = NEAT(cfg, seeds=range(60))
-    fitness_fn = nonmarkov_fitness(controller, cfg)
+    fitness_fn = STUDIES["table2"].fitness(controller, cfg)
     print(f"{controller}: Table II task, 60 runs x {cfg.pop_size}, GA {describe_ga(preset, extra)}")
     print(f"{'gen':>4} {'runs left':>9} {'evaluate s':>11} {'breed s':>8} {'us/genome':>10} {'breed share':>12}")
     shares, per_genome = [], []

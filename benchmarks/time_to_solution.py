@@ -54,8 +54,8 @@ def _step_costs(long_steps: int, repeats: int) -> list[tuple[str, str, float, fl
     wide, _ = random_chunk(9000, 8, 9008, "cpu")
     out = []
     for kind in ("snn", "sigmoid"):
-        ctl1 = make_controller(one, cfg, task, kind=kind)
-        ctl9 = make_controller(wide, cfg, task, kind=kind)
+        ctl1 = make_controller(one, cfg, task, kind)
+        ctl9 = make_controller(wide, cfg, task, kind)
         rollout(task, ctl1, max_steps=2)  # builds and binds the kernels
         for native, path in ((True, "native episodes"), (False, "Python loop")):
             n1 = long_steps if native else max(long_steps // 20, 200)
@@ -76,7 +76,7 @@ def _study(args: list[str], folder: Path) -> tuple[float, float, dict]:
     """Wall and CPU seconds of ``snn-neat reproduce ARGS --out folder``, and its summary.json."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "tasks.cli", "reproduce", *args, "--out", str(folder), "--quiet"],
+    subprocess.run([sys.executable, "-m", "tasks.studies.cli", "reproduce", *args, "--out", str(folder), "--quiet"],
                    check=True, stdout=subprocess.DEVNULL)
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)

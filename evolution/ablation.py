@@ -29,7 +29,7 @@ class StaticMapController:
             raise ValueError(f"settle_steps must be an int >= 1, got {settle_steps!r}")
         self.controller, self.settle_steps = controller, settle_steps
 
-    def __getattr__(self, name: str):  # num_genomes, weight, ...: the wrapped controller's
+    def __getattr__(self, name: str):  # num_genomes, dtype, device, input_coding, ...: the wrapped controller's
         if name == "controller":  # not set yet (copy, unpickling): no recursion
             raise AttributeError(name)
         return getattr(self.controller, name)

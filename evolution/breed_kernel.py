@@ -12,12 +12,13 @@ unused ones changes nothing, and the result is the same with any thread count.
   (no contraction; float32 genomes round where torch rounds), and the same normals
   (``evolution.rng.box_muller``), so the children are the same bit for bit. It also writes
   the children's gene bitsets (``GeneBits``) and, given the representatives, each child's
-  closest one (``speciate``'s first step), while a run's children are still in cache.
+  closest one (``speciate``'s first step), while a run's children are still in cache. The
+  [NEATC] options (``reproduce``'s docstring lists them) are computed here too, the same.
 - ``assign_species``: ``speciate``'s rule (closest living representative within the
   threshold, else found a species in genome order) from per-genome gene bitsets: excess,
   disjoint and matching genes by popcounts (against all living representatives at once, as
   vector loops), the weight term summed in double and skipped once the other terms reach
-  the bound (``evolution.kernel_tests.gene_distances`` gives the distances themselves).
+  the bound (the tests' ``tests/evolution/kernel_entry_points.gene_distances`` gives the distances themselves).
   The reference sums the weight term another way (``L1 - a_only - b_only``), so the two
   agree to about 1e-15.
 - ``touched_nodes``: the node slots the living representatives use, from their bitsets
@@ -25,7 +26,7 @@ unused ones changes nothing, and the result is the same with any thread count.
 
 The C is ``evolution/csrc/breed.c`` (exports declared in ``breed.h``; the draws in
 ``counter_rng.h`` and ``box_muller.h``, the distance in ``gene_distance.h``), built once per
-machine by ``snn_torch._cbuild``; ``SNN_NEAT_C_KERNELS=0`` disables the kernels.
+machine by ``snn_torch.kernels.build``; ``SNN_NEAT_C_KERNELS=0`` disables the kernels.
 """
 
 from __future__ import annotations
@@ -38,11 +39,12 @@ from torch import Tensor
 
 from evolution import select_kernel
 from evolution.config import NEATConfig
+from evolution.neat121 import CLONE_LINK_PROB
 from evolution.population import Genomes
 from evolution.rng import RunRNG
-from snn_torch._cbuild import KernelLibrary, load_libraries
+from snn_torch.kernels.build import KernelLibrary, load_libraries
 
-__all__ = ["kernel_available", "usable_for", "wanted", "breed", "breed_blocks", "GeneBits", "assign_species",
+__all__ = ["kernel_available", "usable_for", "wanted", "breed", "breed_blocks", "toggles_one", "GeneBits", "assign_species",
            "touched_nodes", "found_species", "put_rows"]
 
 # Draw blocks of one breeding step, in the reference's order (the C enum B_* lists them in the
@@ -55,12 +57,25 @@ _BLOCKS = (
     ("s_want", "p", 1), ("s_noise", "p", 2),  # mutate_sigma
     ("toggle", "nn", 1),  # mutate_toggle_enabled
 )
+# mutate_toggle_one ([NEATC]): taken only when ``toggles_one(cfg)``, so that the default
+# configs' streams stay as they were.
+_TOGGLE_ONE_BLOCKS = (("one_want", "p", 1), ("one_pick", "p", 1), ("reenable_want", "p", 1))
 
 
-def breed_blocks(P: int, N: int) -> tuple[list[int], int]:
+def _clone_link_prob(cfg: NEATConfig) -> float:
+    return CLONE_LINK_PROB if cfg.conn_add_prob > 0 else 0.0
+
+
+def toggles_one(cfg: NEATConfig) -> bool:
+    """Whether a breeding step runs ``mutate_toggle_one`` (and takes its draws)."""
+    return cfg.toggle_enable_prob > 0 or cfg.gene_reenable_prob > 0
+
+
+def breed_blocks(P: int, N: int, cfg: NEATConfig | None = None) -> tuple[list[int], int]:
     """Each block's first counter relative to the step's first, and the step's total."""
     starts, at = [], 0
-    for _, kind, per in _BLOCKS:
+    blocks = _BLOCKS + (_TOGGLE_ONE_BLOCKS if cfg is not None and toggles_one(cfg) else ())
+    for _, kind, per in blocks:
         starts.append(at)
         at += (P * N * N if kind == "nn" else P) * per
     return starts, at
@@ -128,7 +143,9 @@ def _require(conn: Tensor, weight: Tensor) -> KernelLibrary:
 
 def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: Tensor, cfg: NEATConfig,
           rng: RunRNG, reserved: Tensor | None, *, runs: Tensor | None = None, in_place: bool = False,
-          reps: tuple[GeneBits, Tensor, Tensor] | None = None) -> tuple[Genomes, Tensor, GeneBits]:
+          reps: tuple[GeneBits, Tensor, Tensor] | None = None, average: Tensor | None = None,
+          severe: Tensor | None = None, recurrent: Tensor | None = None, clones: Tensor | None = None
+          ) -> tuple[Genomes, Tensor, GeneBits]:
     """Children ``[R, P]`` of parents ``first`` / ``second`` (``[R, P]`` genome indices of
     ``g``; ``first`` is the fitter where ``do_cross``), mutated where ``active``: the same as
     ``crossover`` then ``mutate_add_node``, ``mutate_add_connection``, ``mutate_weights``,
@@ -140,12 +157,19 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
     run's parents are copied aside first) and ``g`` itself is returned. ``reps``: ``(bits,
     rep_conn, alive)`` of the species representatives ``[R, S]``; each child's closest living
     one within the threshold is then found as the run's children are written (speciate's first
-    step, while they are in cache), kept in the returned ``GeneBits`` for ``speciate``."""
+    step, while they are in cache), kept in the returned ``GeneBits`` for ``speciate``.
+    ``average[R, P]``, ``severe[R, P]``, ``recurrent[R, P]``: [NEATC]'s averaging crossovers,
+    severe weight mutations and recurrent new links (``reproduce.extra_draws``), as
+    ``crossover``, ``mutate_weights`` and ``mutate_add_connection`` take them;
+    ``cfg.mutation_exclusive`` as ``reproduce`` gates the mutations, and ``mutate_toggle_one``
+    last where ``toggles_one(cfg)``. ``clones[R, P]``: delta coding's clones of a champion,
+    mutated as ``reproduce`` mutates them (a new link with ``neat121.CLONE_LINK_PROB``, else
+    every weight)."""
     lib = _require(g.conn, g.weight)
     (R, P), N = first.shape, g.num_nodes
     T = g.weight.dtype
     threads = torch.get_num_threads()
-    starts, total = breed_blocks(P, N)
+    starts, total = breed_blocks(P, N, cfg)
     base = rng.take(total)
     keys, blocks = rng.keys.contiguous(), torch.tensor(starts, dtype=torch.int64)
     if in_place and (runs is None or not all(t.is_contiguous() for t in g.tensors().values())):
@@ -153,7 +177,15 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
     parents = {k: v.contiguous() for k, v in g.tensors().items()}
     rows = (torch.arange(R) if runs is None else runs.to(torch.int64).cpu()).unsqueeze(1) * P
     a_idx, b_idx = (first + rows).contiguous(), (second + rows).contiguous()
-    cross, act = do_cross.to(torch.uint8).contiguous(), active.to(torch.uint8).contiguous()
+    cross, act = do_cross.to(torch.uint8), active.to(torch.uint8)
+    if average is not None:  # 2: average the matching genes' weights
+        cross = cross + (do_cross & average).to(torch.uint8)
+    # active's further bits, where active: 2 a severe weight mutation, 4 a recurrent new link,
+    # 8 a champion's clone
+    for flags, bit in ((severe, 2), (recurrent, 4), (clones, 8)):
+        if flags is not None:
+            act = act | (active & flags).to(torch.uint8) * bit
+    cross, act = cross.contiguous(), act.contiguous()
     child = g if in_place else Genomes(**{k: torch.empty((R, P, *t.shape[2:]), dtype=t.dtype)
                                           for k, t in parents.items()})
     dest = runs.to(torch.int64).cpu().contiguous() if in_place else None
@@ -192,7 +224,9 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
         float(cfg.sigma_min_value), float(cfg.sigma_max_value), float(cfg.enabled_mutate_rate),
         reserved8.data_ptr(), cfg.first_hidden, None if dest is None else dest.data_ptr(), bits.data_ptr(),
         before.data_ptr(), count.data_ptr(), top.data_ptr(), None if genes.map is None else genes.map.data_ptr(),
-        *rep_args, threads)
+        *rep_args, int(cfg.mutation_exclusive), int(cfg.weight_mutate_neatc), int(cfg.conn_add_recurrence),
+        int(toggles_one(cfg)), float(cfg.toggle_enable_prob), float(cfg.gene_reenable_prob),
+        _clone_link_prob(cfg), threads)
     genes.bits, genes.before, genes.count, genes.top = bits, before, count, top
     return child, request.bool() & ~granted.bool(), genes
 

@@ -118,6 +118,49 @@ class NEATConfig:
     # [NEAT02]: interspecies mating rate 0.001.
     interspecies_crossover_prob: float = field(default=0.001, metadata=_range(0, 1))
 
+    # --- [NEATC] mechanisms (``evolution.neat121`` has the presets); every default keeps
+    # the behaviour above ---------------------------------------------------------------
+    # Stagnant species: 0 removes them ([NEAT02]); a positive factor keeps them and
+    # multiplies their fitness by it when offspring are shared out ([NEATC]
+    # ``Species::adjust_fitness``: 0.01 after ``dropoff_age`` = ``max_stagnation``).
+    stagnant_fitness_factor: float = field(default=0.0, metadata=_range(0, 1))
+    # Every this many generations the worst species at least ``obliterate_min_age``
+    # generations old (the best one if none is) counts as stagnant from then on
+    # ([NEATC] ``Population::epoch``: 30 and 20). 0: never.
+    obliterate_interval: int = field(default=0, metadata=_range(0, None, integer=True))
+    obliterate_min_age: int = field(default=20, metadata=_range(1, None, integer=True))
+    # Whole-population stagnation: when a run's best fitness has not improved for this
+    # many generations, only its two best species get offspring (half each), all clones of
+    # their champions (the last as it is, the others with a new link, 20 %, else every weight
+    # mutated), and their stagnation clocks and the run's restart ([NEATC]
+    # ``highest_last_changed >= dropoff_age + 5``: 20, "delta coding"). 0: never.
+    population_stagnation: int = field(default=0, metadata=_range(0, None, integer=True))
+    # [NEATC] ``Species::reproduce``: a child gets add-node with ``node_add_prob``, else
+    # add-connection with ``conn_add_prob``, else the weight, sigma and enabled mutations.
+    mutation_exclusive: bool = False
+    # [NEATC] ``mate_only_prob`` (0.2): a child of crossover is left unmutated with this probability.
+    mate_only_prob: float = field(default=0.0, metadata=_range(0, 1))
+    # [NEATC] ``Genome::mutate_link_weights`` instead of [NEAT02]'s rule: a genome mutating its
+    # weights (``weight_mutate_rate``) changes every gene by a uniform step in
+    # +-``weight_mutate_power``; half the genomes ("severe") replace 20 % of their genes by such
+    # a value and keep 10 %; otherwise the last fifth of a genome of 10+ genes (slot order) is
+    # replaced 20 %, kept 30 %, and the rest are perturbed.
+    weight_mutate_neatc: bool = False
+    # [NEATC] ``mate_multipoint_avg_prob`` (0.4): a crossover averages the weights of matching
+    # genes with this probability, else takes each from either parent ([NEAT02]).
+    crossover_average_prob: float = field(default=0.0, metadata=_range(0, 1))
+    # [NEATC] ``Genome::mutate_add_link``: a new connection is recurrent (a self-loop, one
+    # closing a cycle of enabled genes, or one into or out of an output) with
+    # ``recur_only_prob`` and otherwise not; none is added when no free slot is of the kind
+    # drawn. Off: any free slot.
+    conn_add_recurrence: bool = False
+    recur_only_prob: float = field(default=0.0, metadata=_range(0, 1))  # [NEATC] 0 DPV, 0.2 DPNV
+    # [NEATC] ``mutate_toggle_enable_prob`` (0.1 DPNV): one random gene (slot order) flips its
+    # enabled flag, but is only disabled if its source keeps another enabled gene.
+    toggle_enable_prob: float = field(default=0.0, metadata=_range(0, 1))
+    # [NEATC] ``mutate_gene_reenable_prob`` (0.05 DPNV): the first disabled gene (slot order) is enabled.
+    gene_reenable_prob: float = field(default=0.0, metadata=_range(0, 1))
+
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
@@ -141,6 +184,9 @@ class NEATConfig:
             raise ConfigError(
                 f"NEATConfig.weight_min_value ({self.weight_min_value}) must be below weight_max_value "
                 f"({self.weight_max_value})")
+        if self.weight_mutate_neatc and self.weight_mutate_per_gene:
+            raise ConfigError("NEATConfig.weight_mutate_neatc and weight_mutate_per_gene are two rules for the "
+                              "same mutation: set at most one")
         if self.sigma_min_value > self.sigma_max_value:
             raise ConfigError(
                 f"NEATConfig.sigma_min_value ({self.sigma_min_value}) must not exceed sigma_max_value "

@@ -16,19 +16,24 @@ from evolution.rng import RunRNG
 __all__ = ["crossover"]
 
 
-def crossover(fit: Genomes, other: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> Genomes:
+def crossover(fit: Genomes, other: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor,
+              average: Tensor | None = None) -> Genomes:
     """Children of ``fit`` (the fitter parent) and ``other``, where ``active[R, P]``.
 
     [NEAT02]: matching genes take their weight from either parent at random; disjoint and
     excess genes come from the fitter parent (so do its nodes); a gene disabled in either
     parent is disabled in the child with probability ``disabled_inherit_prob``. The decoder
     gain ``sigma`` comes from either parent at random. Where ``active`` is False the child
-    is ``fit`` unchanged.
+    is ``fit`` unchanged. ``average[R, P]``: those children take the mean of the parents'
+    weights for matching genes ([NEATC] ``Genome::mate_multipoint_avg``; the same draws).
     """
     P, N = fit.pop_size, fit.num_nodes
     matching = fit.conn & other.conn
     from_other = matching & (rng.rand(P, N, N, dtype=torch.float64) < 0.5)
     weight = torch.where(from_other, other.weight, fit.weight)
+    if average is not None:
+        mean = (fit.weight + other.weight) / 2
+        weight = torch.where(matching & average.view(*average.shape, 1, 1), mean, weight)
     disabled_in_a_parent = fit.conn & (~fit.enabled | (matching & ~other.enabled))
     stays_disabled = disabled_in_a_parent & (rng.rand(P, N, N, dtype=torch.float64) < cfg.disabled_inherit_prob)
     enabled = fit.conn & ~stays_disabled

@@ -5,7 +5,7 @@ split along its genome axis into ``shards`` slices, each evaluated by the user's
 ``fitness_fn`` in a Ray task (one CPU, or one GPU, each), and the ``[R, P_k]`` results are
 concatenated. Selection and reproduction stay in the driver (they are a small part of a
 generation). Whole independent runs are better sent as whole tasks:
-``tasks.experiments.distributed`` does that for ``snn-neat reproduce``.
+``tasks.studies.distributed`` does that for ``snn-neat reproduce``.
 
     import ray
     from evolution import NEAT

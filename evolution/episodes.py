@@ -31,8 +31,8 @@ from evolution.input_coding import CODING_CODES, coding_constants, input_coding_
 from evolution.native_plant import native_plant
 from evolution.phenotype import DECODER_CODES, SigmoidController, SpikingController, kernel_constants
 from evolution.task import Task, TaskError
-from snn_torch._cbuild import library_loader
-from snn_torch.functional.sigmoid_kernel import SIGMOID_MAX_NODES
+from snn_torch.kernels.build import library_loader
+from snn_torch.kernels.sigmoid import SIGMOID_MAX_NODES
 
 __all__ = ["native_rollout", "native_episodes_available"]
 
@@ -50,6 +50,8 @@ def native_episodes_available() -> bool:
 
 
 def _controller_supported(controller) -> bool:
+    if not isinstance(controller, (SpikingController, SigmoidController)):  # only these have C kernels
+        return False
     dtype, device = controller.weight.dtype, controller.weight.device
     if device.type != "cpu" or dtype not in (torch.float32, torch.float64) or controller.weight.requires_grad:
         return False

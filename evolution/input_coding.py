@@ -37,10 +37,11 @@ CODING_CODES = {"unit": 0, "signed": 1, "push_pull": 2}  # the C episode loop's
 
 
 def input_coding_of(controller) -> tuple[str, bool]:
-    """``(input_coding, clip_inputs)`` of a controller's spec (``"unit"``, clipped, for a
-    controller without one)."""
-    spec = getattr(controller, "spec", None)
-    return getattr(spec, "input_coding", "unit"), getattr(spec, "clip_inputs", True)
+    """``(input_coding, clip_inputs)`` of a controller (``Controller.input_coding``), checked;
+    ``("unit", True)`` for a controller that does not say."""
+    coding, clip = getattr(controller, "input_coding", ("unit", True))
+    check_coding(type(controller).__name__, coding, clip)
+    return coding, clip
 
 
 def inputs_per_observation(coding: str) -> int:

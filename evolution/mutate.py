@@ -22,6 +22,8 @@ __all__ = [
     "mutate_weights",
     "mutate_sigma",
     "mutate_toggle_enabled",
+    "mutate_toggle_one",
+    "recurrent_slots",
     "mutate_add_connection",
     "mutate_add_node",
     "add_connection_candidates",
@@ -32,17 +34,30 @@ def _bcast(mask: Tensor, like: Tensor) -> Tensor:
     return mask.view(*mask.shape, *([1] * (like.dim() - mask.dim())))
 
 
-def mutate_weights(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> Genomes:
+def mutate_weights(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor, severe: Tensor | None = None,
+                   force: Tensor | None = None) -> Genomes:
     """[NEAT02]: with ``weight_mutate_rate`` a genome's weights mutate; then each gene is
     replaced by a fresh draw (``weight_replace_rate``) or perturbed by N(0, power^2).
 
     ``cfg.weight_mutate_per_gene`` ([NP]): every gene of an active genome decides alone:
     perturbed with ``weight_mutate_rate``, else replaced with ``weight_replace_rate``, else
     unchanged. Both draw the same random numbers, so neither shifts the other streams.
+
+    ``cfg.weight_mutate_neatc`` ([NEATC] ``Genome::mutate_link_weights``, rate 1): the genomes
+    that mutate their weights change every gene; ``severe[R, P]`` (drawn by the caller) marks
+    the "severe" ones. The same counters: the normals' two uniforms are the step's size and the
+    choice of the cold rate. ``force[R, P]``: those genomes mutate their weights whatever
+    ``weight_mutate_rate`` (not in the per-gene rule).
     """
     P, N = g.pop_size, g.num_nodes
     genome_u = rng.rand(P, dtype=torch.float64)  # drawn in both modes, so the streams stay aligned
     u = rng.rand(P, N, N, dtype=torch.float64)
+    genome_hit = genome_u < cfg.weight_mutate_rate
+    if force is not None:
+        genome_hit = genome_hit | force
+    if cfg.weight_mutate_neatc:
+        return _mutate_weights_neatc(g, cfg, active & genome_hit, u, rng.rand(P, N, N, 2, dtype=torch.float64),
+                                     severe)
     noise = rng.randn(P, N, N, dtype=g.weight.dtype)
     if cfg.weight_mutate_per_gene:
         perturb = u < cfg.weight_mutate_rate
@@ -50,12 +65,33 @@ def mutate_weights(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> 
         gene_hit = _bcast(active, g.weight) & (perturb | replace)
     else:
         replace = u < cfg.weight_replace_rate
-        gene_hit = _bcast(active & (genome_u < cfg.weight_mutate_rate), g.weight)
+        gene_hit = _bcast(active & genome_hit, g.weight)
     fresh = cfg.weight_init_mean + cfg.weight_init_stdev * noise
     perturbed = g.weight + cfg.weight_mutate_power * noise
     new = torch.where(replace, fresh, perturbed).clamp(cfg.weight_min_value, cfg.weight_max_value)
     hit = gene_hit & g.conn
     return Genomes(torch.where(hit, new, g.weight), g.conn, g.enabled, g.node, g.sigma)
+
+
+def _mutate_weights_neatc(g: Genomes, cfg: NEATConfig, hit: Tensor, choice: Tensor, pair: Tensor,
+                          severe: Tensor | None) -> Genomes:
+    """[NEATC]'s rule: gene k of a genome with n genes (slot order) draws ``choice``; it is
+    perturbed above ``gauss``, replaced above ``cold``, else kept, by a step uniform in
+    +-power: severe genomes 0.3 / 0.1; else the tail (n >= 10, k > 0.8 n) 0.5 / 0.3; else
+    0 / -0.1 or 0 / 0 (half each)."""
+    R, P = g.num_runs, g.pop_size
+    sev = torch.zeros(R, P, dtype=torch.bool, device=g.device) if severe is None else severe
+    flat = g.conn.flatten(2)
+    count = flat.sum(-1, keepdim=True).to(torch.float64)
+    index = (flat.cumsum(-1) - 1).to(torch.float64)
+    tail = ((count >= 10.0) & (index > count * 0.8)).view_as(g.conn)
+    sev = sev.view(R, P, 1, 1)
+    gauss = torch.where(sev, 0.3, torch.where(tail, 0.5, 0.0))
+    cold = torch.where(sev, 0.1, torch.where(tail, 0.3, torch.where(pair[..., 1] > 0.5, -0.1, 0.0)))
+    step = ((2.0 * pair[..., 0] - 1.0) * cfg.weight_mutate_power).to(g.weight.dtype)
+    new = torch.where(choice > gauss, g.weight + step, step).clamp(cfg.weight_min_value, cfg.weight_max_value)
+    change = _bcast(hit, g.weight) & g.conn & (choice > cold)
+    return Genomes(torch.where(change, new, g.weight), g.conn, g.enabled, g.node, g.sigma)
 
 
 def mutate_sigma(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> Genomes:
@@ -72,6 +108,44 @@ def mutate_toggle_enabled(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tens
     P, N = g.pop_size, g.num_nodes
     flip = _bcast(active, g.conn) & g.conn & (rng.rand(P, N, N, dtype=torch.float64) < cfg.enabled_mutate_rate)
     return Genomes(g.weight, g.conn, g.enabled ^ flip, g.node, g.sigma)
+
+
+def mutate_toggle_one(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> Genomes:
+    """[NEATC] ``mutate_toggle_enable(1)`` then ``mutate_gene_reenable``: with
+    ``toggle_enable_prob`` one gene, the ``floor(u n)``-th of the ``n`` in slot order, is
+    enabled if disabled, or disabled if another enabled gene leaves its source node; then with
+    ``gene_reenable_prob`` the first disabled gene (slot order) is enabled. Draws three blocks
+    of ``P`` (``breed_kernel`` takes them only when either probability is above 0)."""
+    P, N = g.pop_size, g.num_nodes
+    want = active & (rng.rand(P, dtype=torch.float64) < cfg.toggle_enable_prob)
+    pick = rng.rand(P, dtype=torch.float64)
+    again = active & (rng.rand(P, dtype=torch.float64) < cfg.gene_reenable_prob)
+    flat = g.conn.flatten(2)
+    n = flat.sum(-1)
+    k = (pick * n.to(torch.float64)).long().clamp_max(n - 1).clamp_min(0)
+    slot = torch.searchsorted(flat.long().cumsum(-1), (k + 1).unsqueeze(-1)).squeeze(-1).clamp_max(N * N - 1)
+    enabled = g.enabled.flatten(2).clone()
+    on = torch.gather(enabled, 2, slot.unsqueeze(-1)).squeeze(-1)
+    row = (g.conn & g.enabled).sum(-1)  # [R, P, N]: enabled genes leaving each node
+    others = torch.gather(row, 2, (slot // N).unsqueeze(-1)).squeeze(-1) - on.long()
+    flip = want & (n > 0) & (~on | (others > 0))
+    enabled.scatter_(2, slot.unsqueeze(-1), (on ^ flip).unsqueeze(-1))
+    off = flat & ~enabled
+    first = off.to(torch.int8).argmax(-1, keepdim=True)
+    fix = (again & off.any(-1)).unsqueeze(-1)
+    enabled.scatter_(2, first, torch.gather(enabled, 2, first) | fix)
+    return Genomes(g.weight, g.conn, enabled.view_as(g.enabled), g.node, g.sigma)
+
+
+def recurrent_slots(g: Genomes, cfg: NEATConfig) -> Tensor:
+    """[NEATC]'s recurrent links, ``[R, P, N, N]``: (i, j) closes a cycle of enabled genes
+    (i == j, or a path j -> i), or touches an output node."""
+    N = g.num_nodes
+    reach = reachability(g.conn & g.enabled)
+    idx = torch.arange(N, device=g.device)
+    output = (idx >= cfg.first_output) & (idx < cfg.first_hidden)
+    fixed = (idx.unsqueeze(1) == idx) | output.unsqueeze(1) | output
+    return reach.transpose(-1, -2) | fixed
 
 
 def add_connection_candidates(g: Genomes, cfg: NEATConfig) -> Tensor:
@@ -103,39 +177,53 @@ def _pick_for(mask: Tensor, u: Tensor) -> tuple[Tensor, Tensor, Tensor]:
     return slot // N, slot % N, n > 0
 
 
-def mutate_add_connection(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> Genomes:
+def mutate_add_connection(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor, *,
+                          return_wanted: bool = False, recurrent: Tensor | None = None,
+                          prob: Tensor | None = None) -> Genomes | tuple[Genomes, Tensor]:
     """With ``conn_add_prob``, add one new enabled gene at a random candidate slot.
 
     Candidates are computed only for the genomes that mutate (random numbers are still
     drawn for all, so every run's stream is the same whatever happens elsewhere).
+    ``return_wanted``: also return ``[R, P]`` bool, the genomes that drew the mutation
+    (whether or not a slot was free; [NEATC]'s exclusive mutations go by it).
+    ``recurrent[R, P]`` (with ``cfg.conn_add_recurrence``): those genomes take a recurrent
+    slot (``recurrent_slots``), the others a non-recurrent one (without it: any free slot,
+    as ``reproduce`` draws it). ``prob[R, P]``: each genome's
+    probability instead of ``conn_add_prob``.
     """
     P = g.pop_size
-    want = active & (rng.rand(P, dtype=torch.float64) < cfg.conn_add_prob)
+    want = active & (rng.rand(P, dtype=torch.float64) < (cfg.conn_add_prob if prob is None else prob))
     pick = rng.rand(P, dtype=torch.float64)
     init = cfg.weight_init_mean + cfg.weight_init_stdev * rng.randn(P, dtype=g.weight.dtype)
     init = init.clamp(cfg.weight_min_value, cfg.weight_max_value)
     rows = torch.nonzero(_flat(want)).squeeze(1)
     if rows.numel() == 0:
-        return g
+        return (g, want) if return_wanted else g
     sub = Genomes(**{k: _flat(t)[rows].unsqueeze(0) for k, t in g.tensors().items()})
-    src, dst, possible = _pick_for(add_connection_candidates(sub, cfg)[0], _flat(pick)[rows])
+    cand = add_connection_candidates(sub, cfg)[0]
+    if cfg.conn_add_recurrence and recurrent is not None:
+        rec = recurrent_slots(sub, cfg)[0]
+        cand = cand & (rec == _flat(recurrent)[rows].view(-1, 1, 1))
+    src, dst, possible = _pick_for(cand, _flat(pick)[rows])
     rows, src, dst = rows[possible], src[possible], dst[possible]
     weight, conn, enabled = g.weight.clone(), g.conn.clone(), g.enabled.clone()
     _flat(weight)[rows, src, dst] = _flat(init)[rows]
     _flat(conn)[rows, src, dst] = True
     _flat(enabled)[rows, src, dst] = True
-    return Genomes(weight, conn, enabled, g.node, g.sigma)
+    out = Genomes(weight, conn, enabled, g.node, g.sigma)
+    return (out, want) if return_wanted else out
 
 
 def mutate_add_node(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor,
-                    reserved: Tensor | None = None) -> tuple[Genomes, Tensor]:
+                    reserved: Tensor | None = None, *, return_wanted: bool = False
+                    ) -> tuple[Genomes, Tensor] | tuple[Genomes, Tensor, Tensor]:
     """With ``node_add_prob``, split a random enabled gene (i, j) into i -> k -> j.
 
     The old gene is disabled; i -> k gets weight 1 and k -> j the old weight, so the
     network's function changes little. ``k`` comes from the run's node registry
     (``assign_split_nodes``); ``reserved[R, N]`` marks further slots in use (species
     representatives). Returns the genomes and ``[R, P]`` bool: splits refused for want
-    of a free slot.
+    of a free slot; with ``return_wanted``, also the genomes that drew the mutation.
     """
     R, P = g.num_runs, g.pop_size
     want = active & (rng.rand(P, dtype=torch.float64) < cfg.node_add_prob)
@@ -161,4 +249,5 @@ def mutate_add_node(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor,
         w[rows, i, kk], c[rows, i, kk], e[rows, i, kk] = 1.0, True, True
         w[rows, kk, j], c[rows, kk, j], e[rows, kk, j] = old_w, True, True
         _flat(node)[rows, kk] = True
-    return Genomes(weight, conn, enabled, node, g.sigma), request & ~granted
+    out = Genomes(weight, conn, enabled, node, g.sigma)
+    return (out, request & ~granted, want) if return_wanted else (out, request & ~granted)

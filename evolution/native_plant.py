@@ -1,6 +1,6 @@
 """A task's native step (``Task.native``), built, bound and checked against its torch step.
 
-``native_plant(task, dtype)`` builds the task's C source once per machine (``snn_torch._cbuild``:
+``native_plant(task, dtype)`` builds the task's C source once per machine (``snn_torch.kernels.build``:
 the cache, the compiler flags, the fallback without a compiler), binds its step and observation
 for one state dtype, and checks them against the torch methods before first use (once per task class, native
 parameters and dtype in a process): 100 steps of 64 rows from the task's own start states
@@ -23,7 +23,7 @@ import torch
 from torch import Tensor
 
 from evolution.task import NativeStep, Task, TaskError
-from snn_torch._cbuild import kernels_enabled, load_library
+from snn_torch.kernels.build import kernels_enabled, load_library
 
 __all__ = ["NativePlant", "native_plant", "prototypes"]
 
@@ -37,7 +37,7 @@ _CHECKED: set[tuple] = set()
 
 
 def prototypes(native: NativeStep) -> str:
-    """The C declarations of ``native``'s functions (``snn_torch/csrc/native_plant.h``), for ctypes."""
+    """The C declarations of ``native``'s functions (``snn_torch/kernels/csrc/native_plant.h``), for ctypes."""
     lines = []
     for name, suffix, ctype in _SUFFIX.values():
         if name in native.dtypes:

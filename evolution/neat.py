@@ -32,7 +32,7 @@ from evolution.checkpoint import (
 )
 from evolution.config import ConfigError, NEATConfig
 from evolution.population import Genomes, InvariantError, check_invariants, initial_genomes
-from evolution.reporters import BaseReporter
+from evolution.reporters import BaseReporter, GenerationStatus
 from evolution.reproduce import ReproductionInfo, reproduce
 from evolution.rng import RunRNG
 from evolution.speciate import SpeciesState, empty_species, speciate
@@ -90,6 +90,8 @@ class NEAT:
         self.generation = 0
         self.fitness_target = config.fitness_threshold
         self.reporters: list[BaseReporter] = []
+        self.last_status: GenerationStatus | None = None  # what the reporters saw of the last generation
+        self._extinct_now: list[int] = []
         self.genomes = initial_genomes(config, self.rng, dtype=dtype)
         R = self.num_runs
         state = empty_species(R, config.num_nodes, 4, device=self.rng.device, dtype=dtype)
@@ -117,9 +119,9 @@ class NEAT:
         self.reporters.append(reporter)
         return reporter
 
-    def _report(self, hook: str, *args) -> None:
+    def _report(self, hook: str, arg) -> None:
         for r in self.reporters:
-            getattr(r, hook)(self, *args)
+            getattr(r, hook)(arg)
 
     # --- ask / tell --------------------------------------------------------------------
     def ask(self) -> Genomes:
@@ -152,16 +154,36 @@ class NEAT:
         self.solved_generation = torch.where(newly, self.generation + 1, self.solved_generation)
         first = solved.to(torch.int8).argmax(1)  # the first maximal index: the first solving genome
         self.solved_position = torch.where(newly, first, self.solved_position)
-        self._report("post_evaluate", fitness)
-        if bool(newly.any()):
-            self._report("found_solution", runs[newly].tolist())
-
+        # What reporters see of the evaluated population, taken before breeding overwrites it
+        # (only when some reporter listens).
+        seen = self._evaluated() if self.reporters else None
+        self._extinct_now = []
         evolving = runs[self.active_runs].tolist()
-        if evolving:
-            info = self._reproduce(fitness, evolving)
-            self._report("post_reproduction", info)
+        info = self._reproduce(fitness, evolving) if evolving else None
         self.generation += 1
-        self._report("end_generation")
+        if seen is not None:
+            refused = torch.zeros(R, dtype=torch.long)
+            offspring = torch.zeros(R, 0 if info is None else info.offspring.shape[1], dtype=torch.long)
+            if info is not None:
+                refused[evolving] = info.split_refused.cpu().to(torch.long)
+                offspring[evolving] = info.offspring.cpu().to(torch.long)
+            status = GenerationStatus(generation=self.generation - 1, fitness=fitness, best_fitness=self.best_fitness,
+                                      solved_generation=self.solved_generation, newly_solved=runs[newly].tolist(),
+                                      extinct=self._extinct_now, split_refused=refused, offspring=offspring,
+                                      state_dict=self.state_dict,
+                                      **seen)
+            self.last_status = status
+            if status.newly_solved:
+                self._report("found_solution", status)
+            if status.extinct:
+                self._report("complete_extinction", status)
+            self._report("end_generation", status)
+
+    def _evaluated(self) -> dict[str, Tensor]:
+        """The evaluated population's genes, hidden nodes and species, for ``GenerationStatus``."""
+        return {"genes": self.genomes.num_genes(), "hidden": self.genomes.num_hidden(self.config),
+                "species": self.species.clone(), "species_ident": self.species_state.ident.clone(),
+                "species_alive": self.species_state.alive.clone()}
 
     def _check_fitness(self, fitness: Tensor) -> Tensor:
         R, P = self.num_runs, self.config.pop_size
@@ -204,9 +226,10 @@ class NEAT:
         # A subset's parents are read, and its children written, in the whole population
         # (``runs``, ``in_place``): nothing is copied out and back.
         runs = None if all_runs else sub[0]
+        # C kernels or tensor operators: decided here, once per generation, for breeding and speciation alike
+        fused = breed_kernel.wanted(self.genomes, self.fused_breeding)
         children, _elite, sp, info = reproduce(self.genomes, fitness[sub], self.species[sub], sp, cfg, rng,
-                                               self.generation, fused=self.fused_breeding, runs=runs,
-                                               in_place=not all_runs)
+                                               self.generation, fused=fused, runs=runs, in_place=not all_runs)
         genes = info.child_genes
         if bool(info.extinct.any()):
             genes = None  # the reset genomes are not the bred ones
@@ -216,8 +239,8 @@ class NEAT:
             for name, t in children.tensors().items():
                 t[idx if all_runs else sub[0][idx]] = getattr(fresh, name)
             sp.alive[idx] = False
-            self._report("complete_extinction", [evolving[i] for i in gone])
-        species, sp = speciate(children, sp, cfg, rng, self.generation + 1, fused=self.fused_breeding, runs=runs,
+            self._extinct_now.extend(evolving[i] for i in gone)
+        species, sp = speciate(children, sp, cfg, rng, self.generation + 1, fused=fused, runs=runs,
                                genes=genes)
         info.child_genes = None  # used; reporters keep the numbers only
         if all_runs:
@@ -249,14 +272,15 @@ class NEAT:
             raise ValueError(f"generations must be a non-negative int, got {generations!r}")
         if fitness_target is not None:
             self.fitness_target = float(fitness_target)
+        self.last_status = None
         for _ in range(generations):
             if not bool(self.active_runs.any()):
                 break
-            self._report("start_generation")
+            self._report("start_generation", self.generation)
             genomes = self.ask()
             fitness = self.evaluate_active(fitness_fn, genomes)
             self.tell(fitness, None if solved_fn is None else self.solved_active(solved_fn, genomes, fitness))
-        self._report("end_run")
+        self._report("end_run", self.last_status)
         return self.result()
 
     def evaluate_active(self, fitness_fn: FitnessFn, genomes: Genomes) -> Tensor:
@@ -411,6 +435,8 @@ class NEAT:
             self.generation = int(data["generation"])
             self.fitness_target = float(data["fitness_target"])
             self.reporters = []
+            self.last_status = None
+            self._extinct_now = []
             # Copies: the population is written in place, and must not write into ``data``.
             self.genomes = Genomes(**{k: v.to(target, copy=True, memory_format=torch.contiguous_format)
                                       for k, v in data["genomes"].items()})

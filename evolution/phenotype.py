@@ -12,10 +12,17 @@ constant (a current of ``i_input_max`` for spiking networks, the value 1 for sig
 output slots are read by the decoder; hidden slots are neurons. All of a spiking controller's
 physics and coding choices live in one place, ``SpikingSpec``.
 
-Controllers are stateless modules: ``initial_state(network)`` gives the state of rows mapped to
-networks by ``network [B]`` (several episodes per genome), ``act(obs01, state)`` one control step
-from observations normalised to [0, 1], ``select(state, keep)`` the state of the rows kept when
-finished episodes are dropped. ``evolution.rollout`` drives them on any ``evolution.task.Task``.
+Controllers are stateless modules with the ``evolution.task.Controller`` protocol:
+``initial_state(network)`` gives the state of rows mapped to networks by ``network [B]`` (several
+episodes per genome), ``act(inputs, state)`` one control step from the coded observations,
+``select(state, keep)`` the state of the rows kept when finished episodes are dropped.
+``evolution.rollout`` drives them on any ``evolution.task.Task``.
+
+The spec picks the controller: ``make_controller`` looks the spec's type up in ``CONTROLLERS``
+(``SpikingSpec`` -> ``SpikingController``, ``SigmoidSpec`` -> ``SigmoidController``;
+``register_controller`` adds one), and a name (``"snn"``, ``"sigmoid"``) stands for its spec's
+defaults (``as_spec``). Each controller's encoders and decoders are modules of
+``snn_torch.modules.coding``, looked up by the spec's names in ``ENCODERS`` and the decoder tables.
 """
 
 from __future__ import annotations
@@ -32,7 +39,7 @@ from evolution.config import NEATConfig
 from evolution.input_coding import check_coding, inputs_per_observation
 from evolution.population import Genomes
 from snn_torch.functional.counter_rng import fnv1a_keys
-from snn_torch.functional.decode import bang_bang_force, ordered_matvec
+from snn_torch.functional.decode import ordered_matvec
 from snn_torch.functional.izhikevich import (
     QIU2019,
     IzhikevichParams,
@@ -42,8 +49,8 @@ from snn_torch.functional.izhikevich import (
     izhikevich_init,
     izhikevich_run,
 )
-from snn_torch.functional.network_kernel import RateControlKernel
 from snn_torch.functional.recurrent import RecurrentState
+from snn_torch.kernels.network import RateControlKernel
 from snn_torch.modules.coding import (
     BangBang,
     BernoulliEncoder,
@@ -52,18 +59,34 @@ from snn_torch.modules.coding import (
     RateWindow,
     RateWindowState,
     SigmoidForce,
+    UnitForce,
 )
 from snn_torch.modules.recurrent import PopulationRecurrentIzhikevich, PopulationRecurrentSigmoid
 
 __all__ = ["SpikingSpec", "SigmoidSpec", "SpikingController", "SigmoidController", "SpikingState",
            "SigmoidState", "rest_rate_hz", "used_slots", "local_slots", "NEAT_SIGMOID_SLOPE", "ENCODERS", "SPIKING_DECODERS",
            "SIGMOID_DECODERS", "make_controller", "spiking_config", "SPIKING_SIGMA", "sigmoid_config", "task_config",
-           "controller_kind", "check_controller_config", "CONTROLLER_KINDS", "network_inputs"]
+           "as_spec", "spec_name", "check_controller_config", "CONTROLLERS", "CONTROLLER_NAMES", "register_controller",
+           "network_inputs"]
 
 NEAT_SIGMOID_SLOPE = 4.9  # [NEAT02]
-ENCODERS = ("current", "bernoulli")
-SPIKING_DECODERS = ("sigmoid_force", "bang_bang", "linear")
-SIGMOID_DECODERS = ("sigmoid_force", "bang_bang")
+# The spiking controller's encoders, name -> module from (spec, substeps per control step).
+ENCODERS = {
+    "current": lambda spec, substeps: CurrentEncoder(spec.i_input_max),
+    "bernoulli": lambda spec, substeps: BernoulliEncoder(spec.input_rate_max_hz, dt_ms=spec.dt_ms, substeps=substeps),
+}
+# Each controller's decoders, name -> module from (action_max, spec). The spiking ones read the
+# drive ``d`` with the genome's gain sigma: ``sigmoid_force`` inside the sigmoid, ``linear`` as a
+# factor, ``bang_bang`` not at all (one threshold rule for both controllers: ``BangBang``, strict >).
+SPIKING_DECODERS = {
+    "sigmoid_force": lambda a_max, spec: SigmoidForce(a_max),
+    "bang_bang": lambda a_max, spec: BangBang(a_max, spec.threshold),
+    "linear": lambda a_max, spec: LinearReadout(a_max, low=-a_max, high=a_max),
+}
+SIGMOID_DECODERS = {
+    "sigmoid_force": lambda a_max, spec: UnitForce(a_max),
+    "bang_bang": lambda a_max, spec: BangBang(a_max, threshold=0.5),
+}
 DECODER_CODES = {"sigmoid_force": 0, "bang_bang": 1, "linear": 2}  # the C decoders' (recurrent_izhikevich.h, episodes.h)
 
 
@@ -134,9 +157,9 @@ class SpikingSpec:
         if self.input_rate_max_hz < 0:
             raise ValueError(f"SpikingSpec.input_rate_max_hz must be >= 0, got {self.input_rate_max_hz!r}")
         if self.encoder not in ENCODERS:
-            raise ValueError(f"SpikingSpec.encoder must be one of {ENCODERS}, got {self.encoder!r}")
+            raise ValueError(f"SpikingSpec.encoder must be one of {tuple(ENCODERS)}, got {self.encoder!r}")
         if self.decoder not in SPIKING_DECODERS:
-            raise ValueError(f"SpikingSpec.decoder must be one of {SPIKING_DECODERS}, got {self.decoder!r}")
+            raise ValueError(f"SpikingSpec.decoder must be one of {tuple(SPIKING_DECODERS)}, got {self.decoder!r}")
         if isinstance(self.rate_window_steps, bool) or not isinstance(self.rate_window_steps, int) \
                 or self.rate_window_steps < 1:
             raise ValueError(f"SpikingSpec.rate_window_steps must be an int >= 1, got {self.rate_window_steps!r}")
@@ -172,7 +195,7 @@ class SigmoidSpec:
                 or self.updates_per_step < 1:
             raise ValueError(f"SigmoidSpec.updates_per_step must be an int >= 1, got {self.updates_per_step!r}")
         if self.decoder not in SIGMOID_DECODERS:
-            raise ValueError(f"SigmoidSpec.decoder must be one of {SIGMOID_DECODERS}, got {self.decoder!r}")
+            raise ValueError(f"SigmoidSpec.decoder must be one of {tuple(SIGMOID_DECODERS)}, got {self.decoder!r}")
 
 
 @functools.lru_cache(maxsize=32)
@@ -209,31 +232,35 @@ def sigmoid_config(num_inputs: int, num_outputs: int = 1, **overrides) -> NEATCo
                          "sigma_init_stdev": 0.0, "compatibility_sigma_coefficient": 0.0, **overrides})
 
 
-CONTROLLER_KINDS = ("snn", "sigmoid")
+def as_spec(spec: SpikingSpec | SigmoidSpec | str | None = None):
+    """The spec a controller is made from: a spec as it is; a name of ``CONTROLLER_NAMES``
+    (``"snn"``, ``"sigmoid"``) for that spec's defaults; None for ``SpikingSpec()``. Anything
+    else is a ``ValueError`` naming the choices."""
+    if spec is None:
+        return SpikingSpec()
+    if isinstance(spec, str):
+        if spec not in CONTROLLER_NAMES:
+            raise ValueError(f"a controller name must be one of {tuple(CONTROLLER_NAMES)}, got {spec!r}")
+        return CONTROLLER_NAMES[spec]()
+    if type(spec) not in CONTROLLERS:
+        raise ValueError(f"spec must be one of {[t.__name__ for t in CONTROLLERS]} or a name of "
+                         f"{tuple(CONTROLLER_NAMES)}, got {type(spec).__name__}")
+    return spec
 
 
-def controller_kind(kind: str | None, spec: SpikingSpec | SigmoidSpec | None = None) -> str:
-    """The controller that ``kind`` and ``spec`` name together: the spec's type decides
-    (``SpikingSpec``: ``"snn"``, ``SigmoidSpec``: ``"sigmoid"``); ``kind`` may repeat it or stand
-    alone; neither: ``"snn"``. A kind that disagrees with the spec is a ``ValueError``."""
-    if spec is not None and not isinstance(spec, (SpikingSpec, SigmoidSpec)):
-        raise ValueError(f"spec must be a SpikingSpec or a SigmoidSpec, got {type(spec).__name__}")
-    if kind is not None and kind not in CONTROLLER_KINDS:
-        raise ValueError(f"kind must be one of {CONTROLLER_KINDS}, got {kind!r}")
-    named = None if spec is None else ("snn" if isinstance(spec, SpikingSpec) else "sigmoid")
-    if kind is not None and named is not None and kind != named:
-        raise ValueError(f"kind {kind!r} disagrees with spec {type(spec).__name__} (a {named!r} controller's): "
-                         "pass the spec alone, it decides")
-    return kind or named or "snn"
+def spec_name(spec) -> str:
+    """The controller's name for a spec (``"snn"`` for a ``SpikingSpec``), or its type's name."""
+    spec = as_spec(spec)
+    return next((name for name, t in CONTROLLER_NAMES.items() if type(spec) is t), type(spec).__name__)
 
 
-def task_config(task, kind: str | SpikingSpec | SigmoidSpec = "snn", **overrides) -> NEATConfig:
-    """A ``NEATConfig`` for a controller of ``kind`` (``"snn"``, ``"sigmoid"``, or a spec) on
-    ``task`` (an ``evolution.Task``): its inputs and outputs from the task's observations and
-    actions, then ``spiking_config`` or ``sigmoid_config``; ``overrides`` set any other field."""
-    spec = kind if isinstance(kind, (SpikingSpec, SigmoidSpec)) else None
-    kind = controller_kind(None, spec) if spec is not None else controller_kind(kind)
-    make = spiking_config if kind == "snn" else sigmoid_config
+def task_config(task, spec: SpikingSpec | SigmoidSpec | str | None = "snn", **overrides) -> NEATConfig:
+    """A ``NEATConfig`` for the controller of ``spec`` (a spec, or its name ``"snn"`` / ``"sigmoid"``)
+    on ``task`` (an ``evolution.Task``): its inputs and outputs from the task's observations (as the
+    spec codes them) and actions, then ``spiking_config`` or ``sigmoid_config``; ``overrides`` set
+    any other field."""
+    spec = as_spec(spec)
+    make = sigmoid_config if isinstance(spec, SigmoidSpec) else spiking_config
     return make(network_inputs(task, spec), task.action_size, **overrides)
 
 
@@ -243,12 +270,13 @@ def network_inputs(task, spec: SpikingSpec | SigmoidSpec | None) -> int:
     return task.observation_size * inputs_per_observation(getattr(spec, "input_coding", "unit"))
 
 
-def check_controller_config(config: NEATConfig, kind: str, task, spec: SpikingSpec | SigmoidSpec | None = None) -> None:
-    """``ValueError`` naming the field where ``config`` cannot serve a ``kind`` controller with
-    ``spec`` on ``task``: inputs and outputs other than the task's observations (as the spec
-    codes them) and actions, or, for sigmoid NEAT, a decoder gain sigma that varies and counts
-    in the compatibility distance (a sigmoid controller has no gain, so it would split species
-    over a gene with no effect)."""
+def check_controller_config(config: NEATConfig, task, spec: SpikingSpec | SigmoidSpec | str | None = None) -> None:
+    """``ValueError`` naming the field where ``config`` cannot serve the controller of ``spec`` on
+    ``task``: inputs and outputs other than the task's observations (as the spec codes them) and
+    actions, or, for sigmoid NEAT, a decoder gain sigma that varies and counts in the
+    compatibility distance (a sigmoid controller has no gain, so it would split species over a
+    gene with no effect)."""
+    spec = as_spec(spec)
     inputs = network_inputs(task, spec)
     if config.num_inputs != inputs or config.num_outputs != task.action_size:
         coded = "" if inputs == task.observation_size else f" (coded as {inputs} inputs)"
@@ -256,7 +284,7 @@ def check_controller_config(config: NEATConfig, kind: str, task, spec: SpikingSp
                          f"{task.action_size} actions, but the config has num_inputs={config.num_inputs} and "
                          f"num_outputs={config.num_outputs} (task_config(task, spec) makes a matching one)")
     sigma_varies = config.sigma_mutate_rate > 0 or config.sigma_init_stdev > 0
-    if kind == "sigmoid" and sigma_varies and config.compatibility_sigma_coefficient > 0:
+    if isinstance(spec, SigmoidSpec) and sigma_varies and config.compatibility_sigma_coefficient > 0:
         raise ValueError(f"config.compatibility_sigma_coefficient = {config.compatibility_sigma_coefficient:g} "
                          f"weighs the decoder gain sigma in the compatibility distance and sigma varies "
                          f"(sigma_mutate_rate = {config.sigma_mutate_rate:g}, sigma_init_stdev = "
@@ -326,6 +354,20 @@ class _Phenotype(nn.Module):
         self.outputs = [config.first_output + k for k in range(action_size)]  # the same place in every genome
         self.n_in, self.n_bias = config.num_inputs, config.num_bias
 
+    @property
+    def dtype(self) -> torch.dtype:
+        """The dtype the controller computes in (its weights')."""
+        return self.weight.dtype
+
+    @property
+    def device(self) -> torch.device:
+        return self.weight.device
+
+    @property
+    def input_coding(self) -> tuple[str, bool]:
+        """``(coding, clip)``: how the rollout codes observations for it (``evolution.input_coding``)."""
+        return self.spec.input_coding, self.spec.clip_inputs
+
     def _check_network(self, network: Tensor) -> Tensor:
         if not isinstance(network, Tensor) or network.dim() != 1 or network.dtype != torch.int64:
             raise ValueError("network must be a [B] int64 tensor of genome indices")
@@ -368,11 +410,9 @@ class SpikingController(_Phenotype):
         n = self.num_local
         w_plain = torch.where(self.mask, self.weight, torch.zeros((), dtype=self.weight.dtype, device=self.weight.device))
         self.w_out = w_plain[:, :, self.outputs]  # [G, n, K], the genomes' weights (not kick-scaled)
-        if spec.encoder == "current":
-            self.encoder: nn.Module = CurrentEncoder(spec.i_input_max)
-            self.keys = None
-        else:
-            self.encoder = BernoulliEncoder(spec.input_rate_max_hz, dt_ms=spec.dt_ms, substeps=self.substeps)
+        self.encoder: nn.Module = ENCODERS[spec.encoder](spec, self.substeps)
+        self.keys = None
+        if spec.encoder == "bernoulli":
             N = genomes.num_nodes
             # The genome's full weights: the same key in any batch, whatever slots it simulates.
             self.keys = fnv1a_keys(genomes.effective_weight().reshape(-1, N, N))
@@ -385,16 +425,18 @@ class SpikingController(_Phenotype):
                                  rest_rate_hz(spec.neuron, spec.i_background + middle * spec.i_input_max, spec.dt_ms))
             self.rest = rest.to(device=self.weight.device, dtype=self.weight.dtype)  # [n]
         self.action_max = float(action_max)
-        if spec.decoder == "sigmoid_force":
-            self.decoder: nn.Module = SigmoidForce(action_max)
-        elif spec.decoder == "bang_bang":
-            self.decoder = BangBang(action_max, spec.threshold)
-        else:
-            self.decoder = LinearReadout(action_max, low=-action_max, high=action_max)
+        self.decoder: nn.Module = SPIKING_DECODERS[spec.decoder](self.action_max, spec)
         # input and bias currents of each control step: [n] buffer, bias slots at i_input_max
         self._bias = torch.zeros(n, dtype=self.weight.dtype, device=self.weight.device)
         self._bias[self.n_in : self.n_in + self.n_bias] = spec.i_input_max
         self._kernel: _BoundKernel | None = None  # the C kernel's constants, bound at its first step
+
+    @classmethod
+    def for_task(cls, genomes: Genomes, config: NEATConfig, task, spec: SpikingSpec, *,
+                 backend: str = "auto") -> SpikingController:
+        """The controller of ``genomes`` for ``task``'s observations, actions and control period."""
+        return cls(genomes, config, spec, period_s=task.control_period_s, action_max=task.action_max,
+                   observation_size=task.observation_size, action_size=task.action_size, backend=backend)
 
     def initial_state(self, network: Tensor) -> SpikingState:
         network = self._check_network(network)
@@ -537,6 +579,14 @@ class SigmoidController(_Phenotype):
         self.network = PopulationRecurrentSigmoid(self.weight, self.mask, num_clamped=self.n_in, num_bias=self.n_bias,
                                                   slope=spec.slope, backend="auto" if backend == "compiled" else backend)
         self.action_max = float(action_max)
+        self.decoder: nn.Module = SIGMOID_DECODERS[spec.decoder](self.action_max, spec)
+
+    @classmethod
+    def for_task(cls, genomes: Genomes, config: NEATConfig, task, spec: SigmoidSpec, *,
+                 backend: str = "auto") -> SigmoidController:
+        """The controller of ``genomes`` for ``task``'s observations and actions."""
+        return cls(genomes, config, spec, action_max=task.action_max, observation_size=task.observation_size,
+                   action_size=task.action_size, backend=backend)
 
     def initial_state(self, network: Tensor) -> SigmoidState:
         network = self._check_network(network)
@@ -548,21 +598,32 @@ class SigmoidController(_Phenotype):
     def act(self, obs01: Tensor, state: SigmoidState) -> tuple[Tensor, SigmoidState, Tensor]:
         y = self.network.control_step(obs01.to(self.weight.dtype), state.values, updates=self.spec.updates_per_step,
                                       network=state.network)
-        out = y[:, self.outputs]
-        if self.spec.decoder == "bang_bang":  # +-action_max rounded to the dtype, as the episode loop's
-            action = bang_bang_force(out, threshold=0.5, f_max=self.action_max)
-        else:
-            action = self.action_max * (2.0 * out - 1.0)
-        return action, SigmoidState(state.network, y), y
+        return self.decoder.forward(y[:, self.outputs]), SigmoidState(state.network, y), y
 
 
-def make_controller(genomes: Genomes, config: NEATConfig, task, spec: SpikingSpec | SigmoidSpec | None = None,
-                    *, kind: str | None = None, backend: str = "auto") -> SpikingController | SigmoidController:
-    """The controller of every genome for ``task`` (an ``evolution.task.Task``): a
-    ``SpikingController`` for a ``SpikingSpec`` (or ``kind="snn"``), a ``SigmoidController`` for
-    a ``SigmoidSpec`` (or ``kind="sigmoid"``); the spec decides (``controller_kind``)."""
-    kind = controller_kind(kind, spec)
-    common = dict(action_max=task.action_max, observation_size=task.observation_size, action_size=task.action_size)
-    if kind == "snn":
-        return SpikingController(genomes, config, spec, period_s=task.control_period_s, backend=backend, **common)
-    return SigmoidController(genomes, config, spec, backend=backend, **common)
+# The spec picks the controller: spec type -> the controller class it makes, built by
+# ``cls.for_task(genomes, config, task, spec, backend=...)``; a name -> its spec type (defaults).
+CONTROLLERS: dict[type, type] = {SpikingSpec: SpikingController, SigmoidSpec: SigmoidController}
+CONTROLLER_NAMES: dict[str, type] = {"snn": SpikingSpec, "sigmoid": SigmoidSpec}
+
+
+def register_controller(spec_type: type, controller_type: type, name: str | None = None) -> None:
+    """Make ``make_controller`` build ``controller_type.for_task(genomes, config, task, spec,
+    backend=...)`` for a spec of ``spec_type`` (and ``as_spec(name)`` give ``spec_type()``). The
+    controller must satisfy ``evolution.task.Controller``."""
+    if not isinstance(spec_type, type) or not callable(getattr(controller_type, "for_task", None)):
+        raise ValueError("register_controller takes a spec class and a controller class with a for_task() "
+                         "classmethod")
+    CONTROLLERS[spec_type] = controller_type
+    if name is not None:
+        CONTROLLER_NAMES[name] = spec_type
+
+
+def make_controller(genomes: Genomes, config: NEATConfig, task, spec: SpikingSpec | SigmoidSpec | str | None = None,
+                    *, backend: str = "auto"):
+    """The controller of every genome for ``task`` (an ``evolution.task.Task``), of the spec's
+    type (``CONTROLLERS``): a ``SpikingController`` for a ``SpikingSpec``, a ``SigmoidController``
+    for a ``SigmoidSpec``; a name (``"snn"``, ``"sigmoid"``) means its spec's defaults, None
+    ``SpikingSpec()`` (``as_spec``)."""
+    spec = as_spec(spec)
+    return CONTROLLERS[type(spec)].for_task(genomes, config, task, spec, backend=backend)

@@ -1,24 +1,30 @@
-"""Reporters: hooks the driver calls each generation (neat-python's hook names)."""
+"""Reporters: what the driver tells each generation, as one status (neat-python's hook names).
+
+``NEAT.tell`` builds a ``GenerationStatus`` once per generation, and only when some reporter
+listens: the fitness of the generation just evaluated, each run's best so far and solving
+generation, the evaluated population's species and sizes, what breeding did, and a way to take
+the driver's whole state (for checkpoints). Reporters read it and nothing else, so this module
+knows nothing of the driver; per-run statistics are computed on first use and shared.
+"""
 
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import os
 import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor
 
-from evolution.checkpoint import atomic_write_bytes
+from evolution.checkpoint import atomic_torch_save, atomic_write_bytes
 
-if TYPE_CHECKING:
-    from evolution.neat import NEAT
-    from evolution.reproduce import ReproductionInfo
-
-__all__ = ["BaseReporter", "StdOutReporter", "StatisticsReporter", "TqdmReporter", "Checkpointer"]
+__all__ = ["GenerationStatus", "BaseReporter", "StdOutReporter", "StatisticsReporter", "TqdmReporter", "Checkpointer",
+           "mean_std"]
 
 
 def mean_std(f: Tensor, dim: int = -1) -> tuple[Tensor, Tensor]:
@@ -35,39 +41,106 @@ def mean_std(f: Tensor, dim: int = -1) -> tuple[Tensor, Tensor]:
     return m.squeeze(dim), sd.squeeze(dim)
 
 
-class BaseReporter:
-    """Override any hook; all default to doing nothing."""
+@dataclass(eq=False)
+class GenerationStatus:
+    """One generation, as ``NEAT.tell`` leaves it: every reporter hook receives this.
 
-    def start_generation(self, neat: NEAT) -> None: ...
-    def post_evaluate(self, neat: NEAT, fitness: Tensor) -> None: ...
-    def post_reproduction(self, neat: NEAT, info: ReproductionInfo) -> None: ...
-    def end_generation(self, neat: NEAT) -> None: ...
-    def found_solution(self, neat: NEAT, runs: list[int]) -> None: ...
-    def complete_extinction(self, neat: NEAT, runs: list[int]) -> None: ...
-    def end_run(self, neat: NEAT) -> None: ...
+    Attributes:
+        generation: 0-based index of the generation just evaluated (``generations_done - 1``).
+        fitness: ``[R, P]`` float64, the fitness of the evaluated population (solved runs, which are
+            frozen, report their champion's fitness for every genome).
+        best_fitness: ``[R]`` float64, each run's best fitness so far.
+        solved_generation: ``[R]`` long, the generation (1-based) each run solved in, or -1.
+        newly_solved: runs that solved in this generation.
+        extinct: runs whose every species died in this generation's breeding and that restarted.
+        genes, hidden: ``[R, P]`` long, enabled genes and hidden nodes of each evaluated genome.
+        species: ``[R, P]`` long, each evaluated genome's species slot; ``species_ident`` ``[R, S]``
+            the slot's run-wide species number; ``species_alive`` ``[R, S]`` bool.
+        split_refused: ``[R]`` long, add-node mutations refused for want of a free node slot in
+            this generation's breeding (0 for runs not bred).
+        offspring: ``[R, S']`` long, the offspring breeding allocated to each species slot (0 for
+            runs not bred).
+        state_dict: the driver's whole state after this generation (``NEAT.state_dict``).
+    """
+
+    generation: int
+    fitness: Tensor
+    best_fitness: Tensor
+    solved_generation: Tensor
+    newly_solved: list[int]
+    extinct: list[int]
+    genes: Tensor
+    hidden: Tensor
+    species: Tensor
+    species_ident: Tensor
+    species_alive: Tensor
+    split_refused: Tensor
+    offspring: Tensor
+    state_dict: Callable[[], dict] = field(repr=False)
+
+    @property
+    def generations_done(self) -> int:
+        return self.generation + 1
+
+    @property
+    def num_runs(self) -> int:
+        return int(self.fitness.shape[0])
+
+    @property
+    def active_runs(self) -> Tensor:
+        """Runs still evolving after this generation, ``[R]`` bool."""
+        return self.solved_generation < 0
+
+    @property
+    def num_solved(self) -> int:
+        return int((self.solved_generation >= 0).sum())
+
+    @functools.cached_property
+    def run_statistics(self) -> dict[str, Tensor]:
+        """Per run, ``[R]`` (CPU, float64 unless said): ``best``, ``mean`` and ``std`` of this
+        generation's fitness, ``num_species`` (long), ``mean_genes``, ``mean_hidden``."""
+        f = self.fitness.double().cpu()
+        rows = [mean_std(f[r]) for r in range(f.shape[0])]  # row by row: the same sums, the same bits
+        return {"best": f.amax(1), "mean": torch.stack([m for m, _ in rows]), "std": torch.stack([sd for _, sd in rows]),
+                "num_species": self.species_alive.sum(1).cpu(), "mean_genes": self.genes.double().mean(1).cpu(),
+                "mean_hidden": self.hidden.double().mean(1).cpu()}
+
+
+class BaseReporter:
+    """Override any hook; all default to doing nothing. Hooks run in this order each generation:
+    ``start_generation`` (before evaluation), then after breeding ``found_solution`` (if some run
+    solved), ``complete_extinction`` (if some run restarted) and ``end_generation``; ``end_run``
+    when ``NEAT.run`` returns (with the last status, or None if no generation ran)."""
+
+    def start_generation(self, generation: int) -> None: ...
+    def found_solution(self, status: GenerationStatus) -> None: ...
+    def complete_extinction(self, status: GenerationStatus) -> None: ...
+    def end_generation(self, status: GenerationStatus) -> None: ...
+    def end_run(self, status: GenerationStatus | None) -> None: ...
 
 
 class StdOutReporter(BaseReporter):
-    """One line per generation: best and mean fitness, species, genome size (run 0 or all)."""
+    """One line per generation: best and mean fitness, species, genome size (means over runs)."""
 
     def __init__(self, every: int = 1) -> None:
         self.every = every
         self._t0 = time.perf_counter()
 
-    def post_evaluate(self, neat: NEAT, fitness: Tensor) -> None:
-        if neat.generation % self.every:
+    def end_generation(self, status: GenerationStatus) -> None:
+        if status.generation % self.every:
             return
-        f = fitness.double()
+        f = status.fitness.double()
+        st = status.run_statistics
         elapsed = time.perf_counter() - self._t0
-        n_species = neat.species_state.alive.sum(1).double().mean().item()
-        print(f"gen {neat.generation:4d}  best {mean_std(f.amax(1))[0].item():10.4g}  "
+        print(f"gen {status.generation:4d}  best {mean_std(f.amax(1))[0].item():10.4g}  "
               f"mean {mean_std(f.flatten())[0].item():10.4g}  "
-              f"species {n_species:5.1f}  genes {neat.genomes.num_genes().double().mean().item():6.2f}  "
-              f"hidden {neat.genomes.num_hidden(neat.config).double().mean().item():5.2f}  "
-              f"solved {int((neat.solved_generation >= 0).sum())}/{neat.num_runs}  {elapsed:7.1f} s", flush=True)
+              f"species {st['num_species'].double().mean().item():5.1f}  "
+              f"genes {status.genes.double().mean().item():6.2f}  "
+              f"hidden {status.hidden.double().mean().item():5.2f}  "
+              f"solved {status.num_solved}/{status.num_runs}  {elapsed:7.1f} s", flush=True)
 
-    def complete_extinction(self, neat: NEAT, runs: list[int]) -> None:
-        print(f"gen {neat.generation}: complete extinction in runs {runs}; restarted", flush=True)
+    def complete_extinction(self, status: GenerationStatus) -> None:
+        print(f"gen {status.generation}: complete extinction in runs {status.extinct}; restarted", flush=True)
 
 
 class StatisticsReporter(BaseReporter):
@@ -82,36 +155,17 @@ class StatisticsReporter(BaseReporter):
 
     def __init__(self) -> None:
         self.rows: list[dict] = []
-        self._pending: dict[int, dict] = {}
 
-    def post_evaluate(self, neat: NEAT, fitness: Tensor) -> None:
-        f = fitness.double().cpu()
-        genes = neat.genomes.num_genes().double().mean(1).cpu()
-        hidden = neat.genomes.num_hidden(neat.config).double().mean(1).cpu()
-        species = neat.species_state.alive.sum(1).cpu()
-        for r in range(f.shape[0]):
-            mean, std = mean_std(f[r])  # row by row, as before: the same sums, the same bits
-            self._pending[r] = {
-                "generation": neat.generation, "run": r, "best_fitness": f[r].max().item(),
-                "mean_fitness": mean.item(), "std_fitness": std.item(),
-                "num_species": int(species[r]), "mean_genes": genes[r].item(),
-                "mean_hidden": hidden[r].item(), "split_refused": 0,
-            }
-
-    def post_reproduction(self, neat: NEAT, info: ReproductionInfo) -> None:
-        # ``info`` has a row per run still evolving (solved runs are frozen, not bred), in run order.
-        refused = info.split_refused.cpu().tolist()
-        evolving = torch.nonzero(neat.active_runs).flatten().tolist()
-        for r, count in zip(evolving, refused, strict=True):
-            if r in self._pending:
-                self._pending[r]["split_refused"] = int(count)
-
-    def end_generation(self, neat: NEAT) -> None:
-        self.rows.extend(self._pending[r] for r in sorted(self._pending))
-        self._pending = {}
-
-    def end_run(self, neat: NEAT) -> None:
-        self.end_generation(neat)
+    def end_generation(self, status: GenerationStatus) -> None:
+        st = status.run_statistics
+        refused = status.split_refused.cpu().tolist()
+        for r in range(status.num_runs):
+            self.rows.append({
+                "generation": status.generation, "run": r, "best_fitness": st["best"][r].item(),
+                "mean_fitness": st["mean"][r].item(), "std_fitness": st["std"][r].item(),
+                "num_species": int(st["num_species"][r]), "mean_genes": st["mean_genes"][r].item(),
+                "mean_hidden": st["mean_hidden"][r].item(), "split_refused": int(refused[r]),
+            })
 
     def best_fitness(self) -> Tensor:
         gens = sorted({row["generation"] for row in self.rows})
@@ -131,29 +185,27 @@ class StatisticsReporter(BaseReporter):
 
 
 class TqdmReporter(BaseReporter):
-    """A progress bar over generations showing the best fitness and runs solved."""
+    """A progress bar over generations showing the best fitness and runs solved. Keyword
+    arguments go to ``tqdm`` (``initial``, ``desc``, ``disable``, ``file``, ...)."""
 
     def __init__(self, total: int | None = None, **tqdm_kwargs) -> None:
         self.total = total
-        self.kwargs = tqdm_kwargs
+        self.kwargs = {"desc": "NEAT", **tqdm_kwargs}
         self.bar = None
 
-    def start_generation(self, neat: NEAT) -> None:
+    def start_generation(self, generation: int) -> None:
         if self.bar is None:
             from tqdm.auto import tqdm
 
-            self.bar = tqdm(total=self.total, desc="NEAT", unit="gen", **self.kwargs)
+            self.bar = tqdm(total=self.total, unit="gen", **self.kwargs)
 
-    def post_evaluate(self, neat: NEAT, fitness: Tensor) -> None:
+    def end_generation(self, status: GenerationStatus) -> None:
         if self.bar is not None:
-            self.bar.set_postfix(best=f"{fitness.double().amax().item():.4g}",
-                                 solved=f"{int((neat.solved_generation >= 0).sum())}/{neat.num_runs}")
-
-    def end_generation(self, neat: NEAT) -> None:
-        if self.bar is not None:
+            self.bar.set_postfix(best=f"{status.fitness.double().amax().item():.4g}",
+                                 solved=f"{status.num_solved}/{status.num_runs}")
             self.bar.update(1)
 
-    def end_run(self, neat: NEAT) -> None:
+    def end_run(self, status: GenerationStatus | None) -> None:
         if self.bar is not None:
             self.bar.close()
             self.bar = None
@@ -174,9 +226,9 @@ class Checkpointer(BaseReporter):
         self.keep = keep
         self.written: list[Path] = []
 
-    def end_generation(self, neat: NEAT) -> None:
-        if neat.generation % self.every == 0:
-            self.written.append(neat.save_checkpoint(f"{self.prefix}{neat.generation}.pt"))
+    def end_generation(self, status: GenerationStatus) -> None:
+        if status.generations_done % self.every == 0:
+            self.written.append(atomic_torch_save(status.state_dict(), f"{self.prefix}{status.generations_done}.pt"))
             if self.keep is not None:
                 while len(self.written) > self.keep:
                     self.written.pop(0).unlink(missing_ok=True)

@@ -7,6 +7,13 @@ remainder so the population stays exactly P), the champion copied unchanged when
 has more than 5 members (``elitism`` best members, ``elitism_min_species_size``), the best
 20 % as parents, crossover or cloning, then mutation.
 Parents are discarded.
+
+NEAT C++ 1.2.1's mechanisms ([NEATC], ``evolution.neat121``) are options of ``NEATConfig``,
+all off by default: stagnant species penalised instead of removed, obliteration of the
+worst old species, delta coding after whole-population stagnation, exclusive mutations,
+unmutated children of crossover, its weight perturbation, averaging crossover, new links by
+recurrence, one gene toggled and one re-enabled. Their per-child draws (``extra_draws``)
+and the toggles' blocks are taken only when they are on.
 """
 
 from __future__ import annotations
@@ -25,13 +32,16 @@ from evolution.mutate import (
     mutate_add_node,
     mutate_sigma,
     mutate_toggle_enabled,
+    mutate_toggle_one,
     mutate_weights,
 )
+from evolution.neat121 import CLONE_LINK_PROB
 from evolution.population import Genomes
 from evolution.rng import RunRNG
 from evolution.speciate import SpeciesState
 
-__all__ = ["ReproductionInfo", "allocate_offspring", "share_scale", "reproduce", "select_parents", "update_stagnation"]
+__all__ = ["ReproductionInfo", "allocate_offspring", "share_scale", "reproduce", "select_parents", "update_stagnation",
+           "species_records", "species_order", "population_stagnation", "species_offspring", "extra_draws"]
 
 
 @dataclass
@@ -52,21 +62,99 @@ def update_stagnation(fitness: Tensor, species: Tensor, sp: SpeciesState, cfg: N
     """Record species' best fitness; return ``(state, survivors [R, S], species_fitness [R, S])``.
 
     A species stagnates when its best fitness has not improved for ``max_stagnation``
-    generations; the ``species_elitism`` best species of a run are never removed.
+    generations (or it was obliterated, ``cfg.obliterate_interval``); the ``species_elitism``
+    best species of a run are never removed. With ``cfg.stagnant_fitness_factor`` > 0 no
+    species is removed (``species_records`` says which are penalised instead).
     """
+    new, survivors, sf, _ = species_records(fitness, species, sp, cfg, generation)
+    return new, survivors, sf
+
+
+def species_order(alive: Tensor, sf: Tensor) -> Tensor:
+    """``[R, S]``: each run's living species slots best first (their best fitness this
+    generation, ties by slot), then the dead ones."""
+    order = torch.argsort(torch.where(alive, sf, -torch.inf), dim=1, descending=True, stable=True)
+    dead_last = torch.argsort((~torch.gather(alive, 1, order)).to(torch.int8), dim=1, stable=True)
+    return torch.gather(order, 1, dead_last)
+
+
+def species_records(fitness: Tensor, species: Tensor, sp: SpeciesState, cfg: NEATConfig, generation: int
+                    ) -> tuple[SpeciesState, Tensor, Tensor, Tensor]:
+    """``update_stagnation`` and which surviving species are penalised ([R, S] bool: their
+    fitness shares multiplied by ``cfg.stagnant_fitness_factor``); returns ``(state,
+    survivors, species_fitness, penalised)``.
+
+    [NEATC] ``Population::epoch``: every ``obliterate_interval`` generations (counted from 1,
+    as NEAT C++ counts them) the worst living species of age >= ``obliterate_min_age`` (age 1
+    in the generation it was founded), or the best one if none is that old, is marked
+    ``obliterated``: stagnant from then on."""
     R, S = sp.alive.shape
     sf = torch.full((R, S), -torch.inf, dtype=fitness.dtype, device=fitness.device)
     sf = sf.scatter_reduce(1, species, fitness, "amax")
     improved = sp.alive & (sf > sp.best_fitness)
     best = torch.where(improved, sf, sp.best_fitness)
     last = torch.where(improved, generation, sp.last_improved)
-    stagnant = sp.alive & (generation - last >= cfg.max_stagnation)
+    obliterated = sp.obliterated
+    if cfg.obliterate_interval > 0 and (generation + 1) % cfg.obliterate_interval == 0:
+        order = species_order(sp.alive, sf)
+        pos = torch.arange(S, device=sf.device)
+        old = torch.gather(generation - sp.created + 1, 1, order) >= cfg.obliterate_min_age
+        ok = (old | (pos == 0)) & (pos < sp.alive.sum(1, keepdim=True))
+        pick = torch.where(ok, pos, -1).amax(1, keepdim=True)  # the worst such, -1: no species
+        mark = torch.zeros_like(sp.alive).scatter_(1, torch.gather(order, 1, pick.clamp_min(0)), pick >= 0)
+        obliterated = obliterated | mark
+    stagnant = sp.alive & ((generation - last >= cfg.max_stagnation) | obliterated)
     rank = torch.argsort(torch.argsort(torch.where(sp.alive, sf, -torch.inf), dim=1, descending=True, stable=True),
                          dim=1, stable=True)
     protected = sp.alive & (rank < cfg.species_elitism)
-    survivors = sp.alive & (~stagnant | protected)
-    new = SpeciesState(**{**sp.tensors(), "best_fitness": best, "last_improved": last})
-    return new, survivors, sf
+    if cfg.stagnant_fitness_factor > 0:
+        survivors, penalised = sp.alive.clone(), stagnant & ~protected
+    else:
+        survivors, penalised = sp.alive & (~stagnant | protected), torch.zeros_like(stagnant)
+    new = SpeciesState(**{**sp.tensors(), "best_fitness": best, "last_improved": last, "obliterated": obliterated})
+    return new, survivors, sf, penalised
+
+
+def population_stagnation(fitness: Tensor, sp: SpeciesState, survivors: Tensor, counts: Tensor, sf: Tensor,
+                          cfg: NEATConfig, generation: int) -> tuple[SpeciesState, Tensor, Tensor, Tensor]:
+    """The run's best fitness record, and [NEATC]'s "delta coding": a run whose best fitness
+    has not improved for ``cfg.population_stagnation`` generations gives all its offspring to
+    its two best species (``P // 2`` to the best, the rest to the second; all to the best if
+    it is alone), restarts their stagnation clocks and its own. Returns ``(state, survivors,
+    counts, delta [R])``: ``delta`` marks the runs delta-coded now, whose offspring
+    ``select_parents`` then breeds from the two species' champions alone."""
+    P = fitness.shape[1]
+    top = fitness.to(torch.float64).amax(1)
+    better = top > sp.run_best
+    run_best = torch.where(better, top, sp.run_best)
+    stale = torch.where(better, 0, sp.run_stale + 1)
+    last = sp.last_improved
+    delta = torch.zeros_like(better)
+    if cfg.population_stagnation > 0:
+        delta = stale >= cfg.population_stagnation
+        stale = torch.where(delta, 0, stale)
+        order = species_order(sp.alive, sf)
+        rank = torch.argsort(order, dim=1, stable=True)
+        first, second = sp.alive & (rank == 0), sp.alive & (rank == 1)
+        n_alive = sp.alive.sum(1, keepdim=True)
+        split = torch.where(first, torch.where(n_alive >= 2, P // 2, P), torch.where(second, P - P // 2, 0))
+        d = delta.unsqueeze(1)
+        counts = torch.where(d, split, counts)
+        survivors = torch.where(d, first | second, survivors)
+        last = torch.where(d & (first | second), generation, last)
+    new = SpeciesState(**{**sp.tensors(), "last_improved": last, "run_best": run_best, "run_stale": stale})
+    return new, survivors, counts, delta
+
+
+def species_offspring(fitness: Tensor, species: Tensor, sp: SpeciesState, cfg: NEATConfig, generation: int
+                      ) -> tuple[SpeciesState, Tensor, Tensor, Tensor]:
+    """The tensor reference of ``select_kernel.species_state_offspring``: ``species_records``,
+    ``allocate_offspring``, ``population_stagnation``; returns ``(state, survivors, counts,
+    delta)``."""
+    sp, survivors, sf, penalised = species_records(fitness, species, sp, cfg, generation)
+    counts = allocate_offspring(fitness, species, survivors, fitness.shape[1], penalised,
+                                cfg.stagnant_fitness_factor)
+    return population_stagnation(fitness, sp, survivors, counts, sf, cfg, generation)
 
 
 def share_scale(fitness: Tensor) -> Tensor:
@@ -83,11 +171,13 @@ def share_scale(fitness: Tensor) -> Tensor:
     return torch.where(big, 2.0 ** -e, 1.0).to(torch.float64)
 
 
-def allocate_offspring(fitness: Tensor, species: Tensor, survivors: Tensor, pop_size: int) -> Tensor:
+def allocate_offspring(fitness: Tensor, species: Tensor, survivors: Tensor, pop_size: int,
+                       penalised: Tensor | None = None, factor: float = 1.0) -> Tensor:
     """Offspring per species slot, ``[R, S]`` long, summing to ``pop_size`` in every run
     that has a survivor. Explicit fitness sharing: a species' share is the sum of its
     members' shared fitness ``(f - f_min) / |species|``, i.e. its mean fitness above the
-    run's minimum; all-equal shares split evenly. Rounded by largest remainder."""
+    run's minimum; all-equal shares split evenly. Rounded by largest remainder.
+    ``penalised[R, S]``: those species' shares are multiplied by ``factor`` ([NEATC])."""
     R, S = survivors.shape
     dt = torch.float64
     f = fitness.to(dt) * share_scale(fitness)
@@ -95,7 +185,10 @@ def allocate_offspring(fitness: Tensor, species: Tensor, survivors: Tensor, pop_
     total_f = torch.zeros(R, S, dtype=dt, device=fitness.device).scatter_add_(1, species, f)
     # [NEAT02] shares raw fitness; shift only when a run has negative fitness values.
     f_min = f.amin(1, keepdim=True).clamp_max(0.0)
-    share = torch.where(survivors, total_f / size.clamp_min(1) - f_min, 0.0).clamp_min(0.0)
+    share = torch.where(survivors, total_f / size.clamp_min(1) - f_min, 0.0)
+    if penalised is not None:
+        share = torch.where(penalised, share * factor, share)
+    share = share.clamp_min(0.0)
     total = share.sum(1, keepdim=True)
     share = torch.where(total > 0, share, survivors.to(dt))
     # Summed in slot order (cumsum is sequential; sum's order depends on vector width), the
@@ -129,19 +222,25 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
     """
     if in_place and runs is None:
         raise ValueError("in_place needs runs=")
-    P = fitness.shape[1]
     use_kernels = breed_kernel.wanted(g, fused)
     if use_kernels:
-        best, last, survivors, counts = select_kernel.species_offspring(
-            fitness, species, sp.alive, sp.best_fitness, sp.last_improved, cfg, generation)
-        sp = SpeciesState(**{**sp.tensors(), "best_fitness": best, "last_improved": last})
+        sp, survivors, counts, delta = select_kernel.species_state_offspring(fitness, species, sp, cfg, generation)
         first, second, do_cross, elite = select_kernel.select_parents(
-            fitness, species, survivors, counts, cfg, rng)
+            fitness, species, survivors, counts, cfg, rng, champions=delta)
     else:
-        sp, survivors, _ = update_stagnation(fitness, species, sp, cfg, generation)
-        counts = allocate_offspring(fitness, species, survivors, P)
-        first, second, do_cross, elite = select_parents(fitness, species, survivors, counts, cfg, rng)
+        sp, survivors, counts, delta = species_offspring(fitness, species, sp, cfg, generation)
+        first, second, do_cross, elite = select_parents(fitness, species, survivors, counts, cfg, rng,
+                                                        champions=delta)
     active = ~elite
+    # [NEATC] delta coding: the champions' clones (all but the last, copied as it is) get
+    # weights (80 %) or a new link (20 %), nothing else
+    clones = (delta.unsqueeze(1) & active) if cfg.population_stagnation > 0 else None
+    extra = extra_draws(cfg, rng, fitness.shape[1])
+    if "mate_only" in extra:  # [NEATC]: some children of crossover are left as they are
+        active = active & ~(do_cross & (extra["mate_only"] < cfg.mate_only_prob))
+    average = do_cross & (extra["average"] < cfg.crossover_average_prob) if "average" in extra else None
+    severe = extra["severe"] < 0.5 if "severe" in extra else None
+    recurrent = extra["recurrent"] < cfg.recur_only_prob if "recurrent" in extra else None
     child_genes = None
     if use_kernels and breed_kernel.usable_for_species(sp.rep_conn, sp.rep_weight):
         # The living representatives' genes: the node slots they hold, and each child's closest
@@ -152,17 +251,32 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
         reps, reserved = None, _rep_nodes(sp)
     if use_kernels:
         children, refused, child_genes = breed_kernel.breed(g, first, second, do_cross, active, cfg, rng, reserved,
-                                                            runs=runs, in_place=in_place, reps=reps)
+                                                            runs=runs, in_place=in_place, reps=reps,
+                                                            average=average, severe=severe, recurrent=recurrent,
+                                                            clones=clones)
     else:
         whole = g
         if runs is not None:
             g = g.select_runs(runs)
-        children = crossover(g.gather(first), g.gather(second), cfg, rng, do_cross)
-        children, refused = mutate_add_node(children, cfg, rng, active, reserved=reserved)
-        children = mutate_add_connection(children, cfg, rng, active)
-        children = mutate_weights(children, cfg, rng, active)
-        children = mutate_sigma(children, cfg, rng, active)
-        children = mutate_toggle_enabled(children, cfg, rng, active)
+        children = crossover(g.gather(first), g.gather(second), cfg, rng, do_cross, average)
+        plain = active if clones is None else active & ~clones
+        children, refused, node_wanted = mutate_add_node(children, cfg, rng, plain, reserved=reserved,
+                                                         return_wanted=True)
+        # [NEATC]: add-node, else add-connection, else the other mutations
+        conn_active = active & ~node_wanted if cfg.mutation_exclusive else active
+        link_prob = None if clones is None else torch.where(clones, CLONE_LINK_PROB if cfg.conn_add_prob > 0 else 0.0,
+                                                               cfg.conn_add_prob)
+        children, conn_wanted = mutate_add_connection(children, cfg, rng, conn_active, return_wanted=True,
+                                                      recurrent=recurrent, prob=link_prob)
+        rest = conn_active & ~conn_wanted if cfg.mutation_exclusive else active
+        if clones is not None:
+            rest = torch.where(clones, ~conn_wanted, rest)
+        children = mutate_weights(children, cfg, rng, rest, severe, force=clones)
+        rest = rest if clones is None else rest & ~clones
+        children = mutate_sigma(children, cfg, rng, rest)
+        children = mutate_toggle_enabled(children, cfg, rng, rest)
+        if breed_kernel.toggles_one(cfg):
+            children = mutate_toggle_one(children, cfg, rng, rest)
         if in_place:
             for name, t in whole.tensors().items():
                 t[runs] = getattr(children, name)
@@ -178,11 +292,28 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
     return children, elite, sp, info
 
 
+
+
+def extra_draws(cfg: NEATConfig, rng: RunRNG, P: int) -> dict[str, Tensor]:
+    """The per-child float64 uniforms ``[R, P]`` of the [NEATC] options that are on, in this
+    order: ``mate_only`` (``cfg.mate_only_prob``), ``average`` (``cfg.crossover_average_prob``),
+    ``severe`` (``cfg.weight_mutate_neatc``), ``recurrent`` (``cfg.conn_add_recurrence``). One block of ``P`` counters per run each, taken
+    after selection on both paths, and none when all are off (the streams stay as they were)."""
+    names = [name for name, on in (("mate_only", cfg.mate_only_prob > 0), ("average", cfg.crossover_average_prob > 0),
+                                   ("severe", cfg.weight_mutate_neatc), ("recurrent", cfg.conn_add_recurrence)) if on]
+    if not names:
+        return {}
+    u = rng.rand(len(names), P, dtype=torch.float64)
+    return {name: u[:, k] for k, name in enumerate(names)}
+
+
 def select_parents(fitness: Tensor, species: Tensor, survivors: Tensor, counts: Tensor, cfg: NEATConfig,
-                   rng: RunRNG) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+                   rng: RunRNG, champions: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor, Tensor]:
     """Parents of every child, as tensor operations (``evolution.select_kernel`` computes the
     same in C). Returns ``(first, second, do_cross, elite)``, all ``[R, P]``: ``first`` is the
-    fitter parent where ``do_cross``; elites are copied unchanged."""
+    fitter parent where ``do_cross``; elites are copied unchanged. ``champions[R]``: in those
+    runs every child is a clone of its species' best member, the last one its elite ([NEATC]
+    delta coding); the same draws are taken."""
     R, P = fitness.shape
     S = survivors.shape[1]
     dev = fitness.device
@@ -225,6 +356,12 @@ def select_parents(fitness: Tensor, species: Tensor, survivors: Tensor, counts: 
     p2 = torch.where(inter, any_parent, p2)
 
     do_cross = ~elite & (rng.rand(P, dtype=torch.float64) < cfg.crossover_prob) & (p1 != p2)
+    if champions is not None and bool(champions.any()):
+        clone = champions.unsqueeze(1).expand(R, P)
+        champ = torch.gather(order, 1, o_start)
+        elite = torch.where(clone, pos == torch.gather(counts, 1, osp) - 1, elite)
+        p1, p2 = torch.where(clone, champ, p1), torch.where(clone, champ, p2)
+        do_cross = do_cross & ~clone
     f1, f2 = torch.gather(fitness, 1, p1), torch.gather(fitness, 1, p2)
     fitter = torch.where(f2 > f1, p2, p1)
     other = torch.where(f2 > f1, p1, p2)

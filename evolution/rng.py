@@ -30,7 +30,7 @@ import math
 import torch
 from torch import Tensor
 
-# The C kernels' copy of these primitives: snn_torch/csrc/counter_rng.h.
+# The C kernels' copy of these primitives: snn_torch/kernels/csrc/counter_rng.h.
 from snn_torch.functional.counter_rng import bits, mix64, s64, srl, uniform01
 
 __all__ = ["RunRNG", "mix64", "uniform01", "box_muller", "run_keys", "STREAM_GA"]

@@ -32,15 +32,9 @@ from evolution.config import NEATConfig
 from evolution.episodes import native_rollout
 from evolution.input_coding import code_observations, coding_constants, input_coding_of
 from evolution.native_plant import native_plant
-from evolution.phenotype import (
-    SigmoidSpec,
-    SpikingSpec,
-    check_controller_config,
-    controller_kind,
-    make_controller,
-)
+from evolution.phenotype import SigmoidSpec, SpikingSpec, as_spec, check_controller_config, make_controller
 from evolution.population import Genomes
-from evolution.task import Task, TaskError
+from evolution.task import Controller, Task, TaskError
 from snn_torch.functional.scalars import scalar
 
 __all__ = ["rollout", "RolloutResult", "TaskFitness", "evaluate", "episode_starts", "fresh_starts"]
@@ -159,14 +153,14 @@ def fresh_starts(task: Task, genomes: Genomes, episodes: int, seed: int, *, devi
     return _rebuild(per_run[0], [torch.cat(parts)[index] for parts in zip(*per_run, strict=True)])
 
 
-def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=None, max_steps: int | None = None,
+def rollout(task: Task, controller: Controller, *, episodes: int = 1, seed: int = 0, starts=None, max_steps: int | None = None,
             record: bool = False, compact_below: float = 0.5, native: bool = True) -> RolloutResult:
     """Run every genome of ``controller`` on ``task`` for ``episodes`` episodes, as one batch.
 
     Args:
         task: an ``evolution.task.Task``.
-        controller: ``SpikingController`` or ``SigmoidController`` (``evolution.phenotype``)
-            over ``G`` genomes.
+        controller: any ``evolution.task.Controller`` over ``G`` genomes
+            (``evolution.phenotype.make_controller`` makes NEAT-SNN's and sigmoid NEAT's).
         episodes: episodes per genome; starts: their start states, ``[episodes, ...]`` (as
             ``task.reset`` returns them) shared by every genome, or ``[G * episodes, ...]``, one
             per row (``fresh_starts``); default ``episode_starts(task, episodes, seed)``.
@@ -186,7 +180,7 @@ def rollout(task: Task, controller, *, episodes: int = 1, seed: int = 0, starts=
     if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 0:
         raise ValueError(f"max_steps must be a non-negative int, got {max_steps!r}")
     G = controller.num_genomes
-    dtype, device = controller.weight.dtype, controller.weight.device
+    dtype, device = controller.dtype, controller.device
     if starts is None:
         starts = episode_starts(task, episodes, seed, device=device, dtype=dtype)
     B = G * episodes
@@ -288,9 +282,9 @@ class TaskFitness:
     Args:
         task: the task; config: the NEAT config (inputs = observations, outputs = actions;
             ``task_config`` makes one), checked against the task and the controller here.
-        kind: ``"snn"`` (NEAT-SNN) or ``"sigmoid"`` (sigmoid NEAT); spec: its ``SpikingSpec`` or
-            ``SigmoidSpec``. The spec decides the controller (``kind`` may be left out); neither
-            given: NEAT-SNN with the ``SpikingSpec`` defaults; a kind and a spec that disagree: an error.
+        spec: the controller: a ``SpikingSpec`` (NEAT-SNN) or ``SigmoidSpec`` (sigmoid NEAT), or
+            the name of one with its defaults (``"snn"``, the default, or ``"sigmoid"``;
+            ``evolution.phenotype.as_spec``).
         episodes, seed, starts, max_steps: as ``rollout``; backend: the spiking network's.
         fresh_starts: draw new start states each generation (``fresh_starts``: seeded by ``seed``
             and each run's population, so a resumed run sees the same ones) instead of the same
@@ -300,23 +294,22 @@ class TaskFitness:
             function of the genome.
     """
 
-    def __init__(self, task: Task, config: NEATConfig, kind: str | None = None,
-                 spec: SpikingSpec | SigmoidSpec | None = None, *, episodes: int = 1, seed: int = 0, starts=None,
-                 max_steps: int | None = None, backend: str = "auto", fresh_starts: bool = False) -> None:
-        self.task, self.config, self.spec = task.validate(), config, spec
-        self.kind = controller_kind(kind, spec)
-        check_controller_config(config, self.kind, task, spec)
+    def __init__(self, task: Task, config: NEATConfig, spec: SpikingSpec | SigmoidSpec | str | None = None, *,
+                 episodes: int = 1, seed: int = 0, starts=None, max_steps: int | None = None, backend: str = "auto",
+                 fresh_starts: bool = False) -> None:
+        self.task, self.config, self.spec = task.validate(), config, as_spec(spec)
+        check_controller_config(config, task, self.spec)
         if fresh_starts and starts is not None:
             raise ValueError("TaskFitness takes fixed starts= or fresh_starts=True, not both")
         self.episodes, self.seed, self.starts, self.max_steps, self.backend = episodes, seed, starts, max_steps, backend
         self.fresh_starts = bool(fresh_starts)
 
     def rollout(self, genomes: Genomes, *, record: bool = False) -> RolloutResult:
-        controller = make_controller(genomes, self.config, self.task, self.spec, kind=self.kind, backend=self.backend)
+        controller = make_controller(genomes, self.config, self.task, self.spec, backend=self.backend)
         starts = self.starts
         if self.fresh_starts:
-            starts = fresh_starts(self.task, genomes, self.episodes, self.seed, device=controller.weight.device,
-                                  dtype=controller.weight.dtype)
+            starts = fresh_starts(self.task, genomes, self.episodes, self.seed, device=controller.device,
+                                  dtype=controller.dtype)
         return rollout(self.task, controller, episodes=self.episodes, seed=self.seed, starts=starts,
                        max_steps=self.max_steps, record=record)
 
@@ -325,7 +318,7 @@ class TaskFitness:
         return result.fitness(self.task.fitness).mean(-1).view(genomes.num_runs, genomes.pop_size)
 
 
-def evaluate(task: Task, genomes: Genomes, config: NEATConfig, kind: str | None = None,
-             spec: SpikingSpec | SigmoidSpec | None = None, **kwargs) -> Tensor:
-    """``TaskFitness(task, config, kind, spec, **kwargs)(genomes)``: ``[R, P]`` fitness."""
-    return TaskFitness(task, config, kind, spec, **kwargs)(genomes)
+def evaluate(task: Task, genomes: Genomes, config: NEATConfig, spec: SpikingSpec | SigmoidSpec | str | None = None,
+             **kwargs) -> Tensor:
+    """``TaskFitness(task, config, spec, **kwargs)(genomes)``: ``[R, P]`` fitness."""
+    return TaskFitness(task, config, spec, **kwargs)(genomes)

@@ -7,8 +7,9 @@ overhead made them a third of a generation's GA work, so these kernels do the sa
 a time (threads share out the runs), with the same draws (addressed by counter,
 ``evolution.rng``) and the same arithmetic, so the results are the same bit for bit.
 
-- ``species_offspring``: the species' records, stagnation, and offspring per species
-  (``update_stagnation`` then ``allocate_offspring``, two dozen tensor operations on ``[R, S]``).
+- ``species_state_offspring``: the species' records, stagnation, offspring per species, the
+  run's record and [NEATC]'s obliteration and delta coding (``reproduce.species_offspring``,
+  three dozen tensor operations on ``[R, S]``); ``species_offspring``, its older form.
 - ``select_parents``: members sorted by (species, fitness descending, index), the elites,
   the two parents of each child (within the species, or the second from any species' parents
   for interspecies mating), the crossover decision.
@@ -17,12 +18,14 @@ a time (threads share out the runs), with the same draws (addressed by counter,
   without members emptied.
 
 The C is ``evolution/csrc/select.c`` (exports declared in ``select.h``), built once per machine
-by ``snn_torch._cbuild``.
+by ``snn_torch.kernels.build``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor
@@ -30,9 +33,13 @@ from torch import Tensor
 from evolution.config import NEATConfig
 from evolution.population import Genomes
 from evolution.rng import RunRNG
-from snn_torch._cbuild import KernelLibrary, load_library
+from snn_torch.kernels.build import KernelLibrary, load_library
 
-__all__ = ["kernel_available", "select_parents", "species_offspring", "choose_representatives", "SELECTION_DRAWS"]
+if TYPE_CHECKING:
+    from evolution.speciate import SpeciesState
+
+__all__ = ["kernel_available", "select_parents", "species_offspring", "species_state_offspring", "choose_representatives",
+           "SELECTION_DRAWS"]
 
 SELECTION_DRAWS = 5  # float64 uniform blocks of P per run: p1, p2, any parent, interspecies, crossover
 
@@ -58,12 +65,13 @@ def _require() -> KernelLibrary:
 
 
 def select_parents(fitness: Tensor, species: Tensor, survivors: Tensor, counts: Tensor, cfg: NEATConfig,
-                   rng: RunRNG) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+                   rng: RunRNG, champions: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor, Tensor]:
     """``reproduce``'s selection for ``fitness[R, P]`` (float64), ``species[R, P]``,
     ``survivors[R, S]`` and ``counts[R, S]`` (offspring per slot); takes ``SELECTION_DRAWS``
     blocks of ``P`` counters per run. Returns ``(first, second, do_cross, elite)``, all
     ``[R, P]``: the parents (``first`` the fitter where ``do_cross``), whether to cross, and
-    the elites (copied unchanged)."""
+    the elites (copied unchanged). ``champions[R]``: those runs' children are clones of their
+    species' champions ([NEATC] delta coding, ``reproduce.select_parents``)."""
     lib = _require()
     R, P = fitness.shape
     S = survivors.shape[1]
@@ -77,11 +85,12 @@ def select_parents(fitness: Tensor, species: Tensor, survivors: Tensor, counts: 
     f = fitness.to(torch.float64).contiguous()
     sp, sv, cnt = species.contiguous(), survivors.to(torch.uint8).contiguous(), counts.contiguous()
     keys = rng.keys.contiguous()
+    champ = None if champions is None else champions.to(torch.uint8).contiguous()
     lib.select_parents(f.data_ptr(), sp.data_ptr(), sv.data_ptr(), cnt.data_ptr(), keys.data_ptr(),
                        base.data_ptr(), R, P, S, float(cfg.survival_threshold), cfg.elitism,
                        cfg.elitism_min_species_size, float(cfg.interspecies_crossover_prob),
                        float(cfg.crossover_prob), first.data_ptr(), second.data_ptr(), do_cross.data_ptr(),
-                       elite.data_ptr(), torch.get_num_threads())
+                       elite.data_ptr(), None if champ is None else champ.data_ptr(), torch.get_num_threads())
     return first, second, do_cross.bool(), elite.bool()
 
 
@@ -91,19 +100,55 @@ def species_offspring(fitness: Tensor, species: Tensor, alive: Tensor, best_fitn
     bit for bit: ``fitness[R, P]``, ``species[R, P]``, and the species slots' ``alive``,
     ``best_fitness`` and ``last_improved`` (``[R, S]``). Returns ``(best_fitness,
     last_improved, survivors, counts)``, all ``[R, S]``: the updated records, the species
-    kept, and offspring per slot (``P`` in every run with a survivor)."""
+    kept, and offspring per slot (``P`` in every run with a survivor). For a config without
+    [NEATC]'s obliteration and delta coding (else ``species_state_offspring``)."""
+    R, S = alive.shape
+    out = _offspring(fitness, species, alive, best_fitness, last_improved, torch.zeros(R, S, dtype=torch.int64),
+                     torch.zeros(R, S, dtype=torch.bool), torch.full((R,), -torch.inf, dtype=torch.float64),
+                     torch.zeros(R, dtype=torch.int64), cfg, generation)
+    return out["best_fitness"], out["last_improved"], out["survivors"], out["counts"]
+
+
+def species_state_offspring(fitness: Tensor, species: Tensor, sp: SpeciesState, cfg: NEATConfig, generation: int
+                            ) -> tuple[SpeciesState, Tensor, Tensor, Tensor]:
+    """``reproduce.species_offspring`` in one call, the same bit for bit: the species' records
+    (best fitness, last improvement, obliteration), stagnation, offspring per species, the
+    run's record and [NEATC]'s delta coding. Returns ``(state, survivors [R, S], counts [R, S],
+    delta [R])``."""
+    out = _offspring(fitness, species, sp.alive, sp.best_fitness, sp.last_improved, sp.created, sp.obliterated,
+                     sp.run_best, sp.run_stale, cfg, generation)
+    new = dataclasses.replace(sp, **{k: out[k] for k in ("best_fitness", "last_improved", "obliterated", "run_best",
+                                                          "run_stale")})
+    return new, out["survivors"], out["counts"], out["delta"]
+
+
+def _offspring(fitness: Tensor, species: Tensor, alive: Tensor, best_fitness: Tensor, last_improved: Tensor,
+               created: Tensor, obliterated: Tensor, run_best: Tensor, run_stale: Tensor, cfg: NEATConfig,
+               generation: int) -> dict[str, Tensor]:
+    """The C call behind ``species_offspring`` and ``species_state_offspring``: the slots' new
+    records, ``survivors``, ``counts`` and the runs' ``delta`` coding, by name."""
     lib = _require()
     R, S = alive.shape
     P = fitness.shape[1]
     best, last = torch.empty(R, S, dtype=torch.float64), torch.empty(R, S, dtype=torch.int64)
+    obl, run_best_out, run_stale_out = torch.empty(R, S, dtype=torch.uint8), torch.empty(R, dtype=torch.float64), \
+        torch.empty(R, dtype=torch.int64)
     survivors, counts = torch.empty(R, S, dtype=torch.uint8), torch.empty(R, S, dtype=torch.int64)
+    delta = torch.empty(R, dtype=torch.uint8)
     f = fitness.to(torch.float64).contiguous()
-    sp, al = species.to(torch.int64).contiguous(), alive.to(torch.uint8).contiguous()
+    spc, al = species.to(torch.int64).contiguous(), alive.to(torch.uint8).contiguous()
     b_in, l_in = best_fitness.to(torch.float64).contiguous(), last_improved.to(torch.int64).contiguous()
-    lib.species_offspring(f.data_ptr(), sp.data_ptr(), al.data_ptr(), b_in.data_ptr(), l_in.data_ptr(), R, P, S,
-                          int(generation), int(cfg.max_stagnation), int(cfg.species_elitism), best.data_ptr(),
-                          last.data_ptr(), survivors.data_ptr(), counts.data_ptr(), torch.get_num_threads())
-    return best, last, survivors.bool(), counts
+    created, o_in = created.to(torch.int64).contiguous(), obliterated.to(torch.uint8).contiguous()
+    rb_in, rs_in = run_best.to(torch.float64).contiguous(), run_stale.to(torch.int64).contiguous()
+    lib.species_offspring(f.data_ptr(), spc.data_ptr(), al.data_ptr(), b_in.data_ptr(), l_in.data_ptr(),
+                          created.data_ptr(), o_in.data_ptr(), rb_in.data_ptr(), rs_in.data_ptr(), R, P, S,
+                          int(generation), int(cfg.max_stagnation), int(cfg.species_elitism),
+                          float(cfg.stagnant_fitness_factor), int(cfg.obliterate_interval),
+                          int(cfg.obliterate_min_age), int(cfg.population_stagnation), best.data_ptr(),
+                          last.data_ptr(), obl.data_ptr(), run_best_out.data_ptr(), run_stale_out.data_ptr(),
+                          survivors.data_ptr(), counts.data_ptr(), delta.data_ptr(), torch.get_num_threads())
+    return {"best_fitness": best, "last_improved": last, "obliterated": obl.bool(), "run_best": run_best_out,
+            "run_stale": run_stale_out, "survivors": survivors.bool(), "counts": counts, "delta": delta.bool()}
 
 
 def choose_representatives(g: Genomes, species: Tensor, capacity: int, rng: RunRNG, runs: Tensor | None = None

@@ -30,6 +30,10 @@ class SpeciesState:
     ``alive``: the slot holds a species. ``rep_*``: its representative genome.
     ``best_fitness``: best member fitness ever seen. ``last_improved``, ``created``:
     generations. ``next_id`` and ``ident``: a run-wide species number, for reports.
+    ``obliterated`` (``[R, S]``): marked stagnant for good (``NEATConfig.obliterate_interval``).
+    ``run_best`` and ``run_stale`` (``[R]``): the run's best fitness ever and the generations
+    since it last improved (``NEATConfig.population_stagnation``). These three default to
+    their fresh values, so states saved before they existed still load.
     """
 
     alive: Tensor
@@ -41,6 +45,26 @@ class SpeciesState:
     created: Tensor
     ident: Tensor
     next_id: Tensor  # [R]
+    obliterated: Tensor | None = None  # [R, S] bool
+    run_best: Tensor | None = None  # [R] float64
+    run_stale: Tensor | None = None  # [R] long
+
+    def __post_init__(self) -> None:
+        R, dev = (self.alive.shape[0] if self.alive.dim() else 0), self.alive.device
+        if self.obliterated is None:
+            self.obliterated = torch.zeros(self.alive.shape, dtype=torch.bool, device=dev)
+        if self.run_best is None:
+            self.run_best = torch.full((R,), -torch.inf, dtype=torch.float64, device=dev)
+        if self.run_stale is None:
+            self.run_stale = torch.zeros(R, dtype=torch.long, device=dev)
+        # the C kernels index by these shapes: refuse others here (a crafted checkpoint, say)
+        for name, shape in (("obliterated", tuple(self.alive.shape)), ("run_best", (R,)), ("run_stale", (R,))):
+            if self.alive.dim() != 2:  # NEAT's own checks name the species slots' shape
+                break
+            t = getattr(self, name)
+            if not isinstance(t, Tensor) or tuple(t.shape) != shape:
+                got = tuple(t.shape) if isinstance(t, Tensor) else type(t).__name__
+                raise ValueError(f"SpeciesState.{name} should have shape {shape}, got {got}")
 
     @property
     def capacity(self) -> int:
@@ -54,7 +78,7 @@ class SpeciesState:
         extra = new_capacity - self.capacity
         out = {}
         for name, t in self.tensors().items():
-            if name == "next_id":
+            if t.dim() == 1:  # per run: next_id, run_best, run_stale
                 out[name] = t
                 continue
             pad = torch.zeros((t.shape[0], extra, *t.shape[2:]), dtype=t.dtype, device=t.device)
@@ -136,10 +160,13 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
                                                                                       runs)
     else:
         alive, rep_conn, rep_weight, rep_sigma = _choose_representatives(g, species, sp.capacity, rng)
+    # A mark of obliteration ends with its species (a slot founded anew starts unmarked).
+    obliterated = sp.obliterated & alive & (sp.created != generation)
     return species, SpeciesState(alive=alive, rep_conn=rep_conn, rep_weight=rep_weight, rep_sigma=rep_sigma,
                                  best_fitness=torch.where(alive, sp.best_fitness, -torch.inf),
                                  last_improved=sp.last_improved, created=sp.created, ident=sp.ident,
-                                 next_id=sp.next_id)
+                                 next_id=sp.next_id, obliterated=obliterated, run_best=sp.run_best,
+                                 run_stale=sp.run_stale)
 
 
 def _choose_representatives(g: Genomes, species: Tensor, capacity: int, rng: RunRNG

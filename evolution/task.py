@@ -24,10 +24,14 @@ Bad output from a task (a wrong shape, NaN or inf) is caught at the seam and rai
 ``TaskError`` naming the task, the method and field, and the (genome, episode) indices.
 
 Optionally, ``native``: a ``NativeStep`` naming a C source that defines the same step and
-observation natively (the ABI: ``snn_torch/csrc/native_plant.h``). With it, and a controller
+observation natively (the ABI: ``snn_torch/kernels/csrc/native_plant.h``). With it, and a controller
 with a C kernel, the rollout runs whole episodes in one native call (``evolution.episodes``);
 the torch methods stay the definition (the native step is checked against them, bit for bit,
 when it is bound) and the path on other devices, with no compiler, or when tracing.
+
+The other side of the seam is a ``Controller``: what the rollout drives, row by row (a row is one
+episode of one genome). ``evolution.phenotype`` has two (NEAT-SNN and sigmoid NEAT, picked by the
+spec); any object with the protocol's members runs on every task too.
 """
 
 from __future__ import annotations
@@ -37,14 +41,46 @@ from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
 
 import torch
 from torch import Tensor
 
-__all__ = ["Task", "TaskError", "FITNESS_KINDS", "NativeStep"]
+__all__ = ["Task", "TaskError", "FITNESS_KINDS", "NativeStep", "Controller"]
 
 FITNESS_KINDS = ("return", "steps")
 State = Tensor | tuple[Tensor, ...]
+
+
+@runtime_checkable
+class Controller(Protocol):
+    """What the rollout needs of a controller of ``num_genomes`` networks (``G = R * P``).
+
+    Rows are episodes: ``initial_state(network)`` takes ``network [B]`` (int64, the genome of each
+    row) and returns the controller's per-row state (any tensor, or tuple of tensors, with the rows
+    first); ``act(inputs, state)`` takes the coded observations ``[B, num_inputs]`` (in ``dtype``,
+    coded as ``input_coding`` says) and returns ``(action [B, action_size], state, activity [B, ...])``
+    (``activity``: what a trace records, e.g. spike counts); ``select(state, keep)`` the state of rows
+    ``keep`` (int64 indices), when finished episodes are dropped. ``input_coding`` is ``(coding,
+    clip)`` of ``evolution.input_coding`` (``("unit", True)``: [0, 1] over the task's bounds).
+    """
+
+    num_genomes: int
+
+    @property
+    def dtype(self) -> torch.dtype: ...
+
+    @property
+    def device(self) -> torch.device: ...
+
+    @property
+    def input_coding(self) -> tuple[str, bool]: ...
+
+    def initial_state(self, network: Tensor) -> Any: ...
+
+    def act(self, inputs: Tensor, state: Any) -> tuple[Tensor, Any, Tensor]: ...
+
+    def select(self, state: Any, keep: Tensor) -> Any: ...
 
 
 class TaskError(ValueError):
@@ -54,11 +90,11 @@ class TaskError(ValueError):
 
 @dataclass(frozen=True)
 class NativeStep:
-    """A task's step and observation in C (``snn_torch/csrc/native_plant.h``).
+    """A task's step and observation in C (``snn_torch/kernels/csrc/native_plant.h``).
 
     Attributes:
         source: the C file defining ``{prefix}_step_{f32,f64}`` and ``{prefix}_observe_{f32,f64}``
-            for each dtype in ``dtypes`` (built once per machine by ``snn_torch._cbuild``; it may
+            for each dtype in ``dtypes`` (built once per machine by ``snn_torch.kernels.build``; it may
             ``#include "native_plant.h"`` and ``"portable_math.h"``).
         prefix: the functions' common prefix (a C identifier).
         state_width: columns of the task's ``[B, state_width]`` state tensor.

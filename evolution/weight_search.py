@@ -20,7 +20,7 @@ that was evaluated.
 
 Fitness (maximised): the task's fitness (return or steps survived), up to ``max_steps``,
 averaged over ``starts``: by default the task's own start (``task.reset``); for robustness,
-any fixed set, e.g. the cart-pole's 625 of ``tasks.generalization.start_grid()``.
+any fixed set, e.g. the cart-pole's 625 of ``tasks.studies.generalization.start_grid()``.
 ``_evaluate_batch`` runs the whole EvoTorch population x all starts as one rollout
 (``evolution.rollout``), no Python loop over solutions.
 
@@ -32,8 +32,8 @@ Usage, fine-tuning a NEAT-SNN champion for robustness::
     from evolution import load_genome, save_genome
     from evolution.weight_search import FixedTopologyProblem
     from tasks.cartpole import CartPoleTask
-    from tasks.experiments.cartpole import controller_config
-    from tasks.generalization import start_grid, success_rate
+    from tasks.studies.cartpole import controller_config
+    from tasks.studies.generalization import start_grid, success_rate
 
     config = controller_config("snn")
     champion = load_genome("champion.json", config)          # [1, 1] Genomes
@@ -67,7 +67,7 @@ from evotorch import Problem, SolutionBatch
 from torch import Tensor
 
 from evolution.config import NEATConfig
-from evolution.phenotype import SigmoidSpec, SpikingSpec, make_controller
+from evolution.phenotype import SigmoidSpec, SpikingSpec, as_spec, make_controller, spec_name
 from evolution.population import Genomes
 from evolution.rollout import episode_starts, rollout
 from evolution.task import Task
@@ -97,12 +97,13 @@ class FixedTopologyProblem(Problem):
     """The non-Markov cart-pole as an EvoTorch problem over the weights of a fixed topology.
 
     Args:
-        config: the NEAT layout (``tasks.experiments.cartpole.controller_config``): node
+        config: the NEAT layout (``tasks.studies.cartpole.controller_config``): node
             slots, weight and sigma bounds.
         mask: ``[N, N]`` bool, connection (i, j) from node i to node j is searched. Must
             reach every output and lead into no input or bias node.
-        controller: ``"snn"`` (Qiu et al.'s spiking controller, searches ln sigma too) or
-            ``"sigmoid"`` (the sigmoid NEAT baseline, weights only).
+        controller: ``"snn"`` (Qiu et al.'s spiking controller, searches ln sigma too; the default)
+            or ``"sigmoid"`` (the sigmoid NEAT baseline, weights only): the controller with its
+            spec's defaults; or leave it out and pass ``spec``, which decides.
         task: the ``evolution.task.Task`` to search on (e.g. ``tasks.cartpole.CartPoleTask.nonmarkov()``).
         starts: ``[S, ...]`` start states (as ``task.reset`` returns them); fitness is the mean
             over them (of the return or the steps survived, ``task.fitness``). Default:
@@ -113,21 +114,25 @@ class FixedTopologyProblem(Problem):
             only, weights 0, sigma ``config.sigma_init_mean``.
         init_radius: ``initial_bounds`` are ``initial_solution() +- init_radius`` (used by
             searchers given no ``center_init``, and by ``problem.generate_batch``).
-        spec: the controller's ``SpikingSpec`` or ``SigmoidSpec`` (default: the class defaults).
+        spec: the controller's ``SpikingSpec`` or ``SigmoidSpec`` (default: ``controller``'s defaults).
         dtype, device: of the solutions and of the evaluation.
         **problem_kwargs: passed to ``evotorch.Problem`` (``seed``, ``num_actors``,
             ``num_subbatches``, ``subbatch_size``, ...).
     """
 
-    def __init__(self, config: NEATConfig, mask: Any, *, task: Task, controller: str = "snn",
+    def __init__(self, config: NEATConfig, mask: Any, *, task: Task, controller: str | None = None,
                  starts: Tensor | None = None, episodes: int = 1, start_seed: int = 0, max_steps: int | None = None,
                  template: Genomes | None = None, init_radius: float = 1.0,
                  spec: SpikingSpec | SigmoidSpec | None = None, dtype: torch.dtype = torch.float32,
                  device: str | torch.device = "cpu", **problem_kwargs) -> None:
         if not isinstance(config, NEATConfig):
             raise ValueError(f"config must be a NEATConfig, got {type(config).__name__}")
-        if controller not in CONTROLLERS:
+        if controller is not None and controller not in CONTROLLERS:
             raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
+        spec = as_spec(controller if spec is None else spec)
+        if controller is not None and spec_name(spec) != controller:
+            raise ValueError(f"controller {controller!r} disagrees with spec {type(spec).__name__}: pass one of them")
+        controller = spec_name(spec)
         if not isinstance(task, Task):
             raise ValueError(f"task must be an evolution.task.Task, got {type(task).__name__}")
         task.validate()
@@ -267,7 +272,7 @@ class FixedTopologyProblem(Problem):
         """Mean fitness over ``starts`` (the task's return or steps survived), ``[E]`` float64,
         for ``[E, D]`` solution values: one rollout of ``E`` controllers x ``S`` episodes."""
         genomes = self.decode(values, 1)
-        controller = make_controller(genomes, self.config, self.task, self.spec, kind=self.controller)
+        controller = make_controller(genomes, self.config, self.task, self.spec)
         result = rollout(self.task, controller, episodes=self.starts.shape[0], starts=self.starts,
                          max_steps=self.max_steps)
         return result.fitness(self.task.fitness).mean(-1)

@@ -58,8 +58,8 @@ from evolution import (
     task_config,
 )
 from evolution.checkpoint import atomic_write_bytes
-from tasks.experiments.cartpole import ga_overrides
 from tasks.gym_adapter import GymTask
+from tasks.studies.registry import ga_overrides
 
 __all__ = ["ENVIRONMENTS", "CONTROLLERS", "EnvSetting", "controller_spec", "make_task", "evolve_run", "main"]
 
@@ -92,7 +92,7 @@ ENVIRONMENTS: dict[str, EnvSetting] = {
 }
 CONTROLLERS = ("snn", "sigmoid")
 SEEDS = (0, 1, 2, 3, 4)
-# the study's GA (the double pole's pick for both controllers, tasks.experiments.cartpole.TUNED_GA)
+# the study's GA (the double pole's pick for both controllers, tasks.studies.cartpole.TUNED_GA)
 GA = {**ga_overrides("neat-python"), "survival_threshold": 0.1, "max_hidden": 16}
 CONFIRM_CANDIDATES = 5  # genomes reaching the threshold in training checked on the held-out episodes
 FINAL_CANDIDATES = 20  # of the final generation, re-evaluated when no genome was confirmed

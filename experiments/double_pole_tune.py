@@ -4,7 +4,7 @@
     python -m experiments.double_pole_tune --kind sigmoid --seeds 10 --gens 40 --ga neat-c++ --bounds "[2.4,1,0.26,1,0.26,1]"
 
 Prints each run's best fitness (control steps on DPV, Gruau's fitness on DPNV) every generation.
-Defaults: the study's settings (``tasks.experiments.double_pole``). ``--bounds`` replaces the
+Defaults: the study's settings (``tasks.studies.double_pole``). ``--bounds`` replaces the
 task's observation bounds (the seam normalises over them), ``--cfg``
 and ``--spec`` take JSON overrides of the NEAT config and the controller spec.
 A run is solved by NEAT 2002's test (``champion_solves`` on the same task): on DPV its champion
@@ -21,8 +21,15 @@ from dataclasses import replace
 import torch
 
 from evolution import NEAT, TaskFitness
-from tasks.double_pole import DoublePoleTask, champion_solves, champions_pass
-from tasks.experiments.double_pole import SpeciesChampionTest, study_config, study_spec, study_task
+from tasks.double_pole import DoublePoleTask
+from tasks.studies.double_pole import (
+    SpeciesChampionTest,
+    champion_solves,
+    champions_pass,
+    study_config,
+    study_spec,
+    study_task,
+)
 
 
 def main() -> None:
@@ -48,9 +55,9 @@ def main() -> None:
                               max_steps=task.max_steps, observation_bounds=tuple(json.loads(a.bounds)))
     cfg = study_config(a.task, a.kind, ga=a.ga, **({} if a.pop is None else {"pop_size": a.pop}), **json.loads(a.cfg))
     spec = replace(study_spec(a.task, a.kind), **json.loads(a.spec))
-    fitness = TaskFitness(task, cfg, a.kind, spec)
+    fitness = TaskFitness(task, cfg, spec)
     neat = NEAT(cfg, seeds=list(range(5000, 5000 + a.seeds)))
-    species_test = SpeciesChampionTest(neat, lambda champions: champions_pass(champions, cfg, a.kind, spec, task=task))
+    species_test = SpeciesChampionTest(neat, lambda champions: champions_pass(champions, cfg, spec, task=task))
     t0 = time.time()
     for gen in range(a.gens):
         if not bool(neat.active_runs.any()):
@@ -58,7 +65,7 @@ def main() -> None:
         genomes = neat.ask()
         f = neat.evaluate_active(fitness, genomes)
         test = species_test if a.test == "species" else (
-            lambda g, fit: champion_solves(g, fit, cfg, a.kind, spec, task=task))
+            lambda g, fit: champion_solves(g, fit, cfg, spec, task=task))
         solved = None if velocities else neat.solved_active(test, genomes, f)  # DPV: the config's threshold
         neat.tell(f, solved)
         best = [round(float(b), 3) for b in f.max(1).values]

@@ -31,7 +31,7 @@ from evolution.population import Genomes
 from evolution.rollout import rollout
 from snn_torch.modules.coding import RateWindow, RateWindowState
 from tasks.cartpole import CartPoleTask
-from tasks.experiments.cartpole import NONMARKOV, controller_config
+from tasks.studies.cartpole import NONMARKOV, controller_config
 
 __all__ = ["WipedStateController", "StaticMapController", "ablation_steps"]
 

@@ -18,7 +18,8 @@ import time
 import torch
 
 from evolution.neat import NEAT
-from tasks.experiments.reproduce import _tasks, mann_whitney
+from tasks.studies.registry import study
+from tasks.studies.results import mann_whitney
 
 __all__ = ["sweep", "seed_range", "parse_value"]
 
@@ -26,7 +27,7 @@ __all__ = ["sweep", "seed_range", "parse_value"]
 def sweep(table: str, param: str, values: list[float], seeds: list[int], *, generations: int = 100,
           controllers: tuple[str, ...] = ("snn", "sigmoid"), ga: str = "neat-c++") -> list[dict]:
     """One row per (value, controller): median, mean, failures and wall time."""
-    task = _tasks()[table]
+    task = study(table)
     rows = []
     for value in values:
         counted = {}

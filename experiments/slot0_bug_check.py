@@ -21,7 +21,7 @@ from torch import Tensor
 import evolution.speciate as speciate_module
 from evolution.neat import NEAT
 from evolution.speciate import SpeciesState, _first_true
-from tasks.cli import main as cli_main
+from tasks.studies.cli import main as cli_main
 
 
 def _free_slot_before_the_fix(species: Tensor, sp: SpeciesState, need: Tensor) -> tuple[Tensor, SpeciesState]:

@@ -9,7 +9,7 @@ table's task and prints generations to solve (failures as ``--generations`` + 1)
 the lowest mean, ties broken by the lower median, then by the order of the grid. Tuning
 seeds (5000 and up) are never among the reported seed sets (0-59, 60-119), so a setting is
 never chosen on the runs it is judged by. The picks used by ``snn-neat reproduce`` are
-recorded in ``TUNED_GA`` (``tasks/experiments/cartpole.py``), the numbers that chose them in
+recorded in ``TUNED_GA`` (``tasks/studies/cartpole.py``), the numbers that chose them in
 docs/reproducing.md.
 """
 
@@ -21,7 +21,7 @@ from collections.abc import Callable
 import torch
 
 from experiments.sensitivity import parse_value, seed_range, sweep
-from tasks.experiments.cartpole import GA_PRESETS
+from tasks.studies.registry import GA_PRESETS
 
 __all__ = ["tune"]
 

@@ -1,4 +1,5 @@
-"""Neuron figures: voltage response (Qiu et al. Fig. 1) and f-I curve (Fig. 2).
+"""Spiking figures: a neuron's voltage response (Qiu et al. Fig. 1), its f-I curve (Fig. 2), spike
+rasters of a network, and a training-loss curve for torch models with spiking layers.
 
 Computation and drawing are separate: ``voltage_response`` and ``fi_curve`` return
 tensors; ``plot_*`` draw them on a ``matplotlib.figure.Figure`` (no pyplot state, so they
@@ -11,8 +12,10 @@ import os
 import tempfile
 from pathlib import Path
 
+import numpy as np
 import torch
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 from torch import Tensor
 
 from snn_torch._files import file_mode
@@ -34,6 +37,9 @@ __all__ = [
     "plot_fi_curve",
     "save_figure",
     "save_neuron_figures",
+    "plot_raster",
+    "plot_training_curve",
+    "as_numpy",
 ]
 
 
@@ -138,3 +144,62 @@ def save_neuron_figures(out_dir: str | os.PathLike, *, dt_ms: float = 0.02) -> l
     fig2 = plot_fi_curve(currents, rates, title="Fig. 2: f-I curve, a=0.02 b=0.2 c=-50 mV d=2, $v_t$=30 mV")
     return [save_figure(fig1, out / "fig1_voltage_response.png"),
             save_figure(fig2, out / "fig2_fi_curve.png")]
+
+
+def as_numpy(values) -> np.ndarray:
+    """A float64 numpy array from a tensor, array or list."""
+    if isinstance(values, Tensor):
+        return values.detach().double().cpu().numpy()
+    return np.asarray(values, dtype=np.float64)
+
+
+def _draw_raster(ax, a: np.ndarray, t: np.ndarray, names: list[str] | None) -> None:
+    """One row per neuron, a tick per bin with spikes; the tick thickens with the count (up to 4)."""
+    for n in range(a.shape[1]):
+        hit = a[:, n] > 0
+        ax.vlines(t[hit], n - 0.4, n + 0.4, color="black", linewidths=0.8 + 0.6 * (np.minimum(a[hit, n], 4) - 1))
+    labels = names or [str(n) for n in range(a.shape[1])]
+    step = max(1, a.shape[1] // 16)  # at most ~16 tick labels, so they stay readable
+    ax.set_yticks(range(0, a.shape[1], step), labels[::step])
+    ax.set_ylim(-0.7, a.shape[1] - 0.3)
+    ax.invert_yaxis()
+    ax.set_ylabel("neuron")
+
+
+def plot_raster(activity: Tensor, *, tau_s: float, names: list[str] | None = None, title: str = "",
+                time_unit: str = "s") -> Figure:
+    """Spike counts per time bin ``[T, N]`` (a control step of ``tau_s`` seconds) as a raster,
+    one row per neuron; ``time_unit`` ``"s"`` or ``"ms"`` for the time axis."""
+    if time_unit not in ("s", "ms"):
+        raise ValueError(f"time_unit must be 's' or 'ms', got {time_unit!r}")
+    a = as_numpy(activity)
+    fig = Figure(figsize=(7, min(0.3 * a.shape[1], 4.5) + 1.2), layout="constrained")
+    ax = fig.subplots()
+    t = np.arange(1, a.shape[0] + 1) * tau_s * (1000.0 if time_unit == "ms" else 1.0)
+    _draw_raster(ax, a, t, names)
+    ax.set_xlim(0, t[-1] if len(t) else 1)
+    ax.set_xlabel(f"time ({time_unit})")
+    ax.set_title(title or "spikes per time bin")
+    return fig
+
+
+def plot_training_curve(losses, *, accuracy=None, title: str = "") -> Figure:
+    """Loss per training step and, if given, accuracy (fraction correct) on a second axis."""
+    loss = as_numpy(losses)
+    fig = Figure(figsize=(7, 3.8), layout="constrained")
+    ax = fig.subplots()
+    steps = np.arange(1, len(loss) + 1)
+    handles = ax.plot(steps, loss, color="tab:blue", label="loss")
+    ax.set_xlabel("training step")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_ylabel("loss (cross-entropy, nats)")
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    if accuracy is not None:
+        ax_acc = ax.twinx()
+        handles += ax_acc.plot(steps, as_numpy(accuracy), color="tab:orange", label="accuracy")
+        ax_acc.set_ylabel("accuracy (fraction correct)")
+        ax_acc.set_ylim(0, 1.02)
+    ax.legend(handles=handles, loc="center right")
+    ax.set_title(title or "training")
+    return fig

@@ -30,15 +30,11 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
-from evolution.ablation import StaticMapController
-from evolution.phenotype import make_controller
-from evolution.rollout import rollout
 from evolution.task import NativeStep, Task
 from snn_torch.functional.decode import ordered_sum
 from snn_torch.functional.portable_math import sin_cos
 
-__all__ = ["DoublePoleParams", "DEFAULT_DOUBLE_POLE", "double_pole_derivatives", "double_pole_step", "generalization_starts",
-           "balanced_steps", "champion_solves", "GRUAU_RANGES", "LONG_BALANCE_STEPS", "GENERALIZATION_PASS",
+__all__ = ["DoublePoleParams", "DEFAULT_DOUBLE_POLE", "double_pole_derivatives", "double_pole_step",
            "double_pole_failed", "DoublePoleTask", "DAMPING_WINDOW"]
 
 DAMPING_WINDOW = 100  # steps in Gruau's damping term
@@ -218,71 +214,3 @@ class DoublePoleTask(Task):
 
     def observe(self, state: Tensor) -> Tensor:
         return state[:, self._columns]
-
-
-# Gruau et al. (1996)'s generalisation test as NEAT 2002 runs it: the long pole's four variables
-# each at 0.05, 0.25, 0.5, 0.75 and 0.95 of these ranges, the short pole at rest (625 starts).
-GRUAU_RANGES = (2.16, 1.35, math.radians(3.6), math.radians(8.6))  # m, m/s, rad, rad/s
-GENERALIZATION_FRACTIONS = (0.05, 0.25, 0.5, 0.75, 0.95)
-GENERALIZATION_STEPS, GENERALIZATION_PASS = 1000, 200  # steps balanced per start; starts to pass (NEAT 2002)
-LONG_BALANCE_STEPS = 100_000  # NEAT 2002: a champion must first balance this long from the standard start
-
-
-def generalization_starts(*, device: torch.device | str = "cpu") -> Tensor:
-    """The 625 plant states ``[625, 6]`` (float64): x, x_dot, theta1, theta1_dot on the grid, theta2 = 0."""
-    frac = torch.tensor(GENERALIZATION_FRACTIONS, dtype=torch.float64)
-    grid = torch.cartesian_prod(*(a * (2.0 * frac - 1.0) for a in GRUAU_RANGES))
-    starts = torch.zeros(grid.shape[0], 6, dtype=torch.float64)
-    starts[:, :4] = grid
-    return starts.to(device)
-
-
-def balanced_steps(genomes, config, kind: str = "snn", spec=None, *, velocities: bool = False,
-                   starts: Tensor | None = None, max_steps: int = GENERALIZATION_STEPS,
-                   task: DoublePoleTask | None = None, static_map_steps: int | None = None) -> Tensor:
-    """Control steps ``[R, P, S]`` (int64) each genome balances from each start (plant states
-    ``[S, 6]``; default the standard start), up to ``max_steps``: one rollout of every genome x start.
-    ``task``: the evolved task (its plant, start and observation bounds; default: DPV or DPNV's
-    defaults by ``velocities``). ``static_map_steps``: run each controller as a memoryless map
-    settled this many control steps per observation (``evolution.ablation.StaticMapController``)."""
-    task = (DoublePoleTask(velocities=velocities, fitness="steps", max_steps=max_steps) if task is None
-            else task.with_fitness("steps", max_steps))
-    if starts is None:
-        starts = task.reset(1, None, device=genomes.device)
-    else:
-        starts = task.starts(starts.to(device=genomes.device, dtype=torch.float64))
-    controller = make_controller(genomes, config, task, spec, kind=kind)
-    if static_map_steps is not None:
-        controller = StaticMapController(controller, static_map_steps)
-    result = rollout(task, controller, episodes=starts.shape[0], starts=starts)
-    return result.steps.view(genomes.num_runs, genomes.pop_size, -1)
-
-
-def champion_solves(genomes, fitness: Tensor, config, kind: str = "snn", spec=None, *, velocities: bool = False,
-                    long_steps: int = LONG_BALANCE_STEPS, min_general: int = GENERALIZATION_PASS,
-                    task: DoublePoleTask | None = None) -> Tensor:
-    """NEAT 2002's test of a generation (a ``solved_fn`` for ``NEAT.run``): each run's champion (by
-    ``fitness``) solves when it balances ``long_steps`` steps from the standard start and
-    ``min_general`` or more of the 625 generalisation starts for 1000 steps. ``[R, P]`` bool,
-    true at the solving champions."""
-    best = fitness.argmax(-1, keepdim=True)  # [R, 1]
-    solved = champions_pass(genomes.gather(best), config, kind, spec, velocities=velocities, long_steps=long_steps,
-                            min_general=min_general, task=task)
-    out = torch.zeros(fitness.shape, dtype=torch.bool, device=fitness.device)
-    return out.scatter(1, best, solved.unsqueeze(1))
-
-
-def champions_pass(champions, config, kind: str = "snn", spec=None, *, velocities: bool = False,
-                   long_steps: int = LONG_BALANCE_STEPS, min_general: int = GENERALIZATION_PASS,
-                   task: DoublePoleTask | None = None) -> Tensor:
-    """NEAT 2002's test of one genome per run (``champions`` ``[R, 1]``): ``[R]`` bool, true where it
-    balances ``long_steps`` steps from the standard start and ``min_general`` or more of the 625
-    generalisation starts for 1000 steps (the 625 only for those that passed the first)."""
-    long = balanced_steps(champions, config, kind, spec, velocities=velocities, max_steps=long_steps,
-                          task=task)[:, 0, 0]
-    solved = long >= long_steps
-    if bool(solved.any()):
-        general = (balanced_steps(champions, config, kind, spec, velocities=velocities,
-                                  starts=generalization_starts(), task=task) >= GENERALIZATION_STEPS).sum(-1)[:, 0]
-        solved = solved & (general >= min_general)
-    return solved

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from tasks.cli import main
+from tasks.studies.cli import main
 
 
 def test_figures_command_writes_both_pngs(tmp_path):
@@ -33,7 +33,7 @@ def test_bad_option_is_named(capsys):
 
 
 def test_console_script_help():
-    out = subprocess.run([sys.executable, "-m", "tasks.cli", "figures", "--help"],
+    out = subprocess.run([sys.executable, "-m", "tasks.studies.cli", "figures", "--help"],
                          capture_output=True, text=True, check=True).stdout
     assert "Fig. 1" in out and "--out" in out
 
@@ -48,7 +48,7 @@ def test_every_subcommand_has_help(command, capsys):
 
 def test_evolve_writes_statistics_and_a_loadable_champion(tmp_path):
     from evolution.genome_io import load_genome
-    from tasks.experiments.cartpole import controller_config
+    from tasks.studies.cartpole import controller_config
 
     assert main(["evolve", "--controller", "snn", "--generations", "2", "--out", str(tmp_path), "--verbose"]) == 0
     rows = (tmp_path / "statistics.csv").read_text().splitlines()
@@ -59,7 +59,7 @@ def test_evolve_writes_statistics_and_a_loadable_champion(tmp_path):
 
 def test_evolve_markov_task(tmp_path, capsys):
     from evolution.genome_io import load_genome
-    from tasks.experiments.cartpole import markov_config
+    from tasks.studies.cartpole import markov_config
 
     assert main(["evolve", "--task", "markov", "--controller", "sigmoid", "--generations", "2", "--seed", "3",
                  "--out", str(tmp_path), "--verbose"]) == 0

@@ -14,8 +14,8 @@ import pytest
 import torch
 
 from evolution.checkpoint import load_checkpoint_dict
-from tasks.cli import CommandError, main
-from tasks.lock import LOCK_NAME, OutputLock
+from tasks.studies.cli import CommandError, main
+from tasks.studies.lock import LOCK_NAME, OutputLock
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -88,7 +88,7 @@ def test_a_damaged_checkpoint_is_one_line_naming_it(capsys, tmp_path):
 
 
 def _hold_lock(out: Path) -> subprocess.Popen:
-    code = ("import sys, time; from tasks.lock import OutputLock; OutputLock(sys.argv[1], 'snn-neat other').acquire(); "
+    code = ("import sys, time; from tasks.studies.lock import OutputLock; OutputLock(sys.argv[1], 'snn-neat other').acquire(); "
             "print('held', flush=True); time.sleep(120)")
     proc = subprocess.Popen([sys.executable, "-c", code, str(out)], env=ENV, stdout=subprocess.PIPE, text=True)
     assert proc.stdout.readline().strip() == "held"
@@ -145,7 +145,7 @@ def test_files_honour_the_umask(tmp_path):
 
 
 def test_ctrl_c_exits_130_naming_the_resume_command_and_resume_equals_uninterrupted(tmp_path, capsys, monkeypatch):
-    import tasks.experiments.xor as xor_mod
+    import tasks.studies.xor as xor_mod
 
     argv = ["xor", "--runs", "3", "--generations", "6", "--seed", "7", "--quiet", "--checkpoint-every", "1"]
     assert main([*argv, "--out", str(tmp_path / "ref")]) == 0
@@ -177,7 +177,7 @@ def test_ctrl_c_exits_130_naming_the_resume_command_and_resume_equals_uninterrup
 
 
 def test_an_interrupted_xor_report_does_not_look_complete(tmp_path, monkeypatch):
-    import tasks.experiments.xor as xor_mod
+    import tasks.studies.xor as xor_mod
 
     summary = xor_mod.run_xor([1, 2], generations=2, progress=False)
     out = tmp_path / "x"
@@ -213,14 +213,14 @@ def test_evolve_survives_sigint_then_sigkill_and_resumes_to_the_same_bits(tmp_pa
     args = ["evolve", "--controller", "snn", "--task", "markov", "--generations", "7", "--seed", "3", "--threads", "1"]
     assert main([*args, "--out", str(tmp_path / "ref")]) == 0
     cut = tmp_path / "cut"
-    proc = subprocess.Popen([sys.executable, "-m", "tasks.cli", *args, "--out", str(cut)], env=ENV,
+    proc = subprocess.Popen([sys.executable, "-m", "tasks.studies.cli", *args, "--out", str(cut)], env=ENV,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     _wait_for_checkpoint(cut / "evolve.ckpt", 1, proc)
     proc.send_signal(signal.SIGINT)
     assert proc.wait(timeout=120) == 130
     last = proc.stderr.read().strip().splitlines()[-1]
     assert "Traceback" not in last and last.endswith(f"--out {cut} --resume"), last
-    proc = subprocess.Popen([sys.executable, "-m", "tasks.cli", *args, "--out", str(cut), "--resume"], env=ENV,
+    proc = subprocess.Popen([sys.executable, "-m", "tasks.studies.cli", *args, "--out", str(cut), "--resume"], env=ENV,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     _wait_for_checkpoint(cut / "evolve.ckpt", 2, proc)
     assert proc.poll() is None, "the run finished before it could be killed"
@@ -252,7 +252,7 @@ def test_a_crafted_command_checkpoint_is_one_line_naming_it(capsys, tmp_path):
 def test_run_checkpoint_writes_every_n_generations_or_by_time_and_at_the_end(tmp_path, monkeypatch, every,
                                                                              interval_s, saved):
     from evolution.neat import NEAT
-    from tasks.experiments.resumable import RunCheckpoint
+    from tasks.studies.resumable import RunCheckpoint
     from tests.evolution.helpers import small_config
 
     neat = NEAT(small_config(), seeds=[0])
@@ -260,7 +260,7 @@ def test_run_checkpoint_writes_every_n_generations_or_by_time_and_at_the_end(tmp
                                            interval_s=interval_s))
     written = []
     real = ckpt.save
-    monkeypatch.setattr(ckpt, "save", lambda n: written.append(n.generation) or real(n))
+    monkeypatch.setattr(ckpt, "save", lambda status: written.append(status.generations_done) or real(status))
     neat.run(lambda g: torch.zeros(1, 6, dtype=torch.float64), 5)
     assert written == saved
 
@@ -274,7 +274,7 @@ def test_ray_missing_is_one_line(capsys, tmp_path, monkeypatch):
 @pytest.mark.parametrize("error", [MemoryError(), RuntimeError("[enforce fail] DefaultCPUAllocator: can't allocate "
                                                                 "memory: you tried to allocate 8000000000000 bytes")])
 def test_running_out_of_memory_is_one_line(error, capsys, tmp_path, monkeypatch):
-    import tasks.experiments.xor as xor_mod
+    import tasks.studies.xor as xor_mod
 
     def exhausted(*args, **kwargs):
         raise error
@@ -287,8 +287,8 @@ def test_running_out_of_memory_is_one_line(error, capsys, tmp_path, monkeypatch)
                                                ("table1", "snn"), ("table2", "sigmoid")])
 def test_the_memory_check_sizes_the_configs_the_study_evolves(table, controller):
     """The check reads the config run_controller evolves: DPNV's population of 1000, not Table II's 150."""
-    from tasks.cli import _configs, build_parser
-    from tasks.experiments.reproduce import study_config
+    from tasks.studies.cli import _configs, build_parser
+    from tasks.studies.reproduce import study_config
 
     args = build_parser().parse_args(["reproduce", table, "--controllers", controller])
     [config] = _configs(args)

@@ -18,7 +18,9 @@
 
 /* The draw blocks of a step, in evolution.breed_kernel._BLOCKS's order. */
 enum { B_FROM_OTHER, B_STAYS, B_SIGMA_PICK, B_NODE_WANT, B_NODE_PICK, B_CONN_WANT, B_CONN_PICK, B_CONN_INIT,
-       B_W_GENOME, B_W_U, B_W_NOISE, B_S_WANT, B_S_NOISE, B_TOGGLE, N_BLOCKS };
+       B_W_GENOME, B_W_U, B_W_NOISE, B_S_WANT, B_S_NOISE, B_TOGGLE,
+       B_ONE_WANT, B_ONE_PICK, B_REENABLE, /* only when toggle_one: breed_kernel._TOGGLE_ONE_BLOCKS */
+       N_BLOCKS };
 #define MAX_ROWS 64 /* the feed-forward closure: N <= 64 rows of one 64-bit word */
 
 /* The bytes (0/1) of mask[0..n) as W = ceil(n / 64) words of bits, branch-free: eight bytes to
@@ -65,7 +67,7 @@ static inline int64_t pick_k(double u, int64_t n) {
 }
 
 #define VECTOR_REPS 3 /* species assignment: vector loops over at least this many representatives */
-enum { JOB_CONN, JOB_PERTURB, JOB_REPLACE, JOB_SIGMA }; /* what a phase-2 normal is for */
+enum { JOB_CONN, JOB_PERTURB, JOB_REPLACE, JOB_SIGMA, JOB_NC_PERTURB, JOB_NC_REPLACE }; /* what a phase-2 job is for */
 #define DEFINE_BREED(T, SFX)                                                                      \
 static inline T clampT_##SFX(T x, T lo, T hi) { x = x < lo ? lo : x; return x > hi ? hi : x; }   \
 /* Phase 1: crossover (or a copy of the first parent), then the add-node choice. */              \
@@ -101,10 +103,12 @@ static inline void phase1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *p
                 u_from[g] = uniform01(key, c_from + genes[g]);                                    \
                 u_stay[g] = uniform01(key, c_stay + genes[g]);                                    \
             }                                                                                     \
+            const int avg = do_cross[row] == 2; /* [NEATC] mate_multipoint_avg */                 \
             for (int64_t g = 0; g < n; ++g) {                                                     \
                 const int64_t s = genes[g];                                                       \
                 const int matching = oc[s] != 0;                                                  \
-                if (matching && u_from[g] < 0.5) w[s] = ow[s];                                    \
+                if (matching && avg) w[s] = (T)(fw[s] + ow[s]) / (T)2;                            \
+                else if (matching && u_from[g] < 0.5) w[s] = ow[s];                               \
                 const int dip = !fe[s] || (matching && !oe[s]);                                   \
                 e[s] = !(dip && u_stay[g] < inherit_disabled);                                    \
             }                                                                                     \
@@ -113,7 +117,7 @@ static inline void phase1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *p
             memcpy(e, fe, NN); cs[crow] = ps[a];                                                  \
         }                                                                                         \
         request[row] = 0; src[row] = 0; dst[row] = 0;                                             \
-        if (active[row] && uniform01(key, b0 + blocks[B_NODE_WANT] + p) < node_add_prob) {        \
+        if (active[row] && !(active[row] & 8) && uniform01(key, b0 + blocks[B_NODE_WANT] + p) < node_add_prob) {\
             uint64_t on[MAX_SLOTS / 64];                                                          \
             pack_bits(e, NN, W, on);                                                              \
             const int64_t n = bits_to_slots(on, W, genes);                                        \
@@ -137,7 +141,9 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
                   double w_stdev, double w_min, double w_max, double w_rate, double w_rate_sum,   \
                   double w_replace, double w_power, double s_rate, double s_power, double s_min,  \
                   double s_max, double toggle_rate, int64_t row0, int64_t row1, uint64_t *gbits,  \
-                  int64_t *gbefore, int64_t *gcount, int64_t *gtop) {                             \
+                  int64_t *gbefore, int64_t *gcount, int64_t *gtop, int exclusive,                \
+                  double node_add_prob, int neatc, int recur_split, int one_on, double one_prob,   \
+                  double re_prob, int64_t first_hidden, double clone_link_prob) {                 \
     const int64_t NN = N * N, W = (NN + 63) / 64;                                                 \
     const T mean = (T)w_mean, stdev = (T)w_stdev, lo = (T)w_min, hi = (T)w_max, power = (T)w_power;\
     const int64_t max_jobs = (row1 - row0) * (NN + 3);                                            \
@@ -165,7 +171,12 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
         if (!active[row]) { bits_summary(bits, W, gbefore + row * W, gcount + row, gtop + row); continue; }\
         int32_t genes[MAX_SLOTS + 1];                                                             \
         int64_t n_genes = bits_to_slots(bits, W, genes);                                          \
-        if (uniform01(key, b0 + blocks[B_CONN_WANT] + p) < conn_add_prob) {                       \
+        /* [NEATC] exclusive: add-node (its draw), else add-connection, else the rest */         \
+        const int clone = (active[row] & 8) != 0; /* delta coding: a new link, else every weight */\
+        const int node_drawn = exclusive && !clone && uniform01(key, b0 + blocks[B_NODE_WANT] + p) < node_add_prob;\
+        const int conn_drawn = !node_drawn &&                                                     \
+            uniform01(key, b0 + blocks[B_CONN_WANT] + p) < (clone ? clone_link_prob : conn_add_prob);\
+        if (conn_drawn) {                                                                         \
             /* rows as bitsets: out[i] = genes i -> j; into[j] = i with a path i -> j (closure) */\
             uint64_t out[MAX_ROWS] = {0}, into[MAX_ROWS] = {0}, nodes = 0, ends = 0;              \
             for (int64_t j = 0; j < N; ++j) nodes |= (uint64_t)(nd[j] != 0) << j;                 \
@@ -185,9 +196,32 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
             const uint64_t targets = nodes & ~((1ULL << first_output) - 1); /* not into inputs */ \
             uint64_t cand[MAX_ROWS];                                                              \
             int64_t n = 0;                                                                        \
+            uint64_t reach[MAX_ROWS] = {0}; /* [NEATC]: reach[i] = j with a path j -> i of enabled genes */\
+            const uint64_t outputs = (first_hidden >= 64 ? ~0ULL : (1ULL << first_hidden) - 1) & ~((1ULL << first_output) - 1);\
+            const int want_rec = (active[row] & 4) != 0;                                          \
+            if (recur_split) {                                                                    \
+                uint64_t on_ends = 0;                                                             \
+                for (int64_t g = 0; g < n_genes; ++g) {                                           \
+                    if (!e[genes[g]]) continue;                                                   \
+                    const int64_t i = genes[g] / N, j = genes[g] % N;                             \
+                    reach[j] |= 1ULL << i; on_ends |= 1ULL << i | 1ULL << j;                      \
+                }                                                                                 \
+                for (uint64_t ks = on_ends; ks; ks &= ks - 1) {                                   \
+                    const int64_t k = __builtin_ctzll(ks);                                        \
+                    const uint64_t via = reach[k];                                                \
+                    for (uint64_t js = on_ends; js; js &= js - 1) {                               \
+                        const int64_t j = __builtin_ctzll(js);                                    \
+                        reach[j] |= via & (0 - (reach[j] >> k & 1));                              \
+                    }                                                                             \
+                }                                                                                 \
+            }                                                                                     \
             for (int64_t i = 0; i < N; ++i) {                                                     \
                 uint64_t m = (nodes >> i & 1) ? targets & ~out[i] : 0;                            \
                 if (feed_forward) m &= ~(into[i] | 1ULL << i); /* no self loop, no path j -> i */ \
+                if (recur_split) { /* i -> j recurrent: j == i, a path j -> i, or an output end */\
+                    const uint64_t rec = (outputs >> i & 1) ? ~0ULL : (reach[i] | 1ULL << i | outputs);\
+                    m &= want_rec ? rec : ~rec;                                                   \
+                }                                                                                 \
                 cand[i] = m; n += __builtin_popcountll(m);                                        \
             }                                                                                     \
             if (n > 0) {                                                                          \
@@ -200,9 +234,24 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
                 genes[n_genes++] = (int32_t)s;                                                    \
             }                                                                                     \
         }                                                                                         \
-        const int genome_hit = uniform01(key, b0 + blocks[B_W_GENOME] + p) < w_rate;              \
+        if (clone ? !conn_drawn : (!exclusive || (!node_drawn && !conn_drawn))) {                 \
+        const int genome_hit = uniform01(key, b0 + blocks[B_W_GENOME] + p) < w_rate || clone;     \
         const uint64_t c_u = b0 + blocks[B_W_U] + p * NN, c_z = b0 + blocks[B_W_NOISE] + 2 * p * NN;\
-        if (per_gene || genome_hit) {                                                             \
+        if (neatc && genome_hit) { /* [NEATC] mutate_link_weights: genes in slot order */        \
+            n_genes = bits_to_slots(bits, W, genes);                                              \
+            const int severe = (active[row] & 2) != 0;                                            \
+            const double cnt = (double)n_genes;                                                   \
+            for (int64_t g = 0; g < n_genes; ++g) {                                               \
+                const double choice = uniform01(key, c_u + genes[g]);                             \
+                const double half = uniform01(key, c_z + 2 * (uint64_t)genes[g] + 1);             \
+                const int tail = cnt >= 10.0 && (double)g > cnt * 0.8;                            \
+                const double gauss = severe ? 0.3 : (tail ? 0.5 : 0.0);                           \
+                const double cold = severe ? 0.1 : (tail ? 0.3 : (half > 0.5 ? -0.1 : 0.0));      \
+                job_counter[n_jobs] = c_z + 2 * (uint64_t)genes[g]; job_row[n_jobs] = (int32_t)crow;\
+                job_slot[n_jobs] = genes[g]; job_kind[n_jobs] = choice > gauss ? JOB_NC_PERTURB : JOB_NC_REPLACE;\
+                n_jobs += choice > cold;                                                          \
+            }                                                                                     \
+        } else if (per_gene || genome_hit) {                                                      \
             /* which genes change, and how */                                                     \
             double u[MAX_SLOTS + 1];                                                              \
             _Pragma("omp simd")                                                                   \
@@ -217,7 +266,7 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
                 n_jobs += h;                                                                      \
             }                                                                                     \
         }                                                                                         \
-        if (uniform01(key, b0 + blocks[B_S_WANT] + p) < s_rate) {                                 \
+        if (!clone && uniform01(key, b0 + blocks[B_S_WANT] + p) < s_rate) {                       \
             job_counter[n_jobs] = b0 + blocks[B_S_NOISE] + 2 * p; job_row[n_jobs] = (int32_t)crow; \
             job_slot[n_jobs] = 0; job_kind[n_jobs++] = JOB_SIGMA;                                 \
         }                                                                                         \
@@ -225,7 +274,24 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
         uint8_t flip[MAX_SLOTS + 1];                                                              \
         _Pragma("omp simd")                                                                       \
         for (int64_t g = 0; g < n_genes; ++g) flip[g] = uniform01(key, c_t + genes[g]) < toggle_rate; \
-        for (int64_t g = 0; g < n_genes; ++g) e[genes[g]] ^= flip[g];                             \
+        for (int64_t g = 0; g < n_genes; ++g) e[genes[g]] ^= flip[g] & !clone;                    \
+        if (one_on && !clone) { /* [NEATC] toggle one gene, then re-enable the first disabled one */        \
+            int32_t sorted[MAX_SLOTS + 1];                                                        \
+            const int64_t n_sorted = bits_to_slots(bits, W, sorted);                              \
+            if (uniform01(key, b0 + blocks[B_ONE_WANT] + p) < one_prob && n_sorted > 0) {          \
+                const int64_t s = sorted[pick_k(uniform01(key, b0 + blocks[B_ONE_PICK] + p), n_sorted)];\
+                if (!e[s]) e[s] = 1;                                                              \
+                else {                                                                            \
+                    const int64_t i = s / N;                                                      \
+                    int others = 0;                                                               \
+                    for (int64_t j = 0; j < N; ++j) others += i * N + j != s && c[i * N + j] && e[i * N + j];\
+                    if (others) e[s] = 0;                                                         \
+                }                                                                                 \
+            }                                                                                     \
+            if (uniform01(key, b0 + blocks[B_REENABLE] + p) < re_prob)                            \
+                for (int64_t g = 0; g < n_sorted; ++g) if (!e[sorted[g]]) { e[sorted[g]] = 1; break; }\
+        }                                                                                         \
+        }                                                                                         \
         bits_summary(bits, W, gbefore + row * W, gcount + row, gtop + row);                       \
     }                                                                                             \
     _Pragma("omp simd")                                                                           \
@@ -240,6 +306,9 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
         } else if (job_kind[q] == JOB_SIGMA) {                                                    \
             T step = zt * (T)s_power;                                                             \
             cs[job_row[q]] = clampT_##SFX(cs[job_row[q]] + step, (T)s_min, (T)s_max);             \
+        } else if (job_kind[q] >= JOB_NC_PERTURB) { /* a step uniform in +-power */               \
+            const T step = (T)((2.0 * uniform01(key, job_counter[q]) - 1.0) * w_power);           \
+            w[s] = clampT_##SFX(job_kind[q] == JOB_NC_PERTURB ? w[s] + step : step, lo, hi);       \
         } else {                                                                                  \
             T fresh = zt * stdev; fresh = fresh + mean;                                           \
             T step = zt * power; T pert = w[s] + step;                                            \
@@ -329,7 +398,8 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
                  int64_t *gcount, int64_t *gtop, const int64_t *gmap, const uint64_t *r_bits,     \
                  const int64_t *r_pre, const int64_t *r_cnt, const int64_t *r_top, const T *r_w,  \
                  const T *r_sig, const uint8_t *r_alive, int64_t S, const double *coef, double thr,\
-                 int64_t *nearest, int threads) {                                                 \
+                 int64_t *nearest, int exclusive, int neatc, int recur_split, int one_on,         \
+                 double one_prob, double re_prob, double clone_link_prob, int threads) {          \
     const int64_t NN = N * N, words = (NN + 63) / 64;                                             \
     _Pragma("omp parallel for schedule(static) num_threads(threads)")                             \
     for (int64_t r = 0; r < R; ++r) {                                                             \
@@ -388,7 +458,8 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
         phase2_##SFX(cw_r, cc_r, ce_r, cn_r, cs_r, new_node, granted, src, dst, active, keys, base, blocks, R, P, N,\
                      first_output, feed_forward, per_gene, conn_add_prob, w_mean, w_stdev, w_min, w_max,\
                      w_rate, w_rate_sum, w_replace, w_power, s_rate, s_power, s_min, s_max, toggle_rate,\
-                     row0, row1, gbits, gbefore, gcount, gtop);                                   \
+                     row0, row1, gbits, gbefore, gcount, gtop, exclusive, node_add_prob, neatc,   \
+                     recur_split, one_on, one_prob, re_prob, first_hidden, clone_link_prob);      \
         if (nearest) { /* speciate's first step, while the run's children are in cache */         \
             const genes_##SFX cg = {gbits, gbefore, gcount, gtop, cw, cs, gmap};                  \
             const genes_##SFX rg = {r_bits, r_pre, r_cnt, r_top, r_w, r_sig, NULL};               \

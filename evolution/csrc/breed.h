@@ -1,5 +1,5 @@
 /* The breeding step and speciation as C kernels, for evolution.breed_kernel (which documents
-   the arguments). Every function here is exported; snn_torch._cbuild sets the ctypes signatures
+   the arguments). Every function here is exported; snn_torch.kernels.build sets the ctypes signatures
    from these prototypes, and breed.c includes this header, so the compiler checks them. */
 #ifndef SNN_NEAT_BREED_H
 #define SNN_NEAT_BREED_H
@@ -21,7 +21,8 @@ void breed_f32(const float *pw, const uint8_t *pc, const uint8_t *pe, const uint
                uint64_t *gbits, int64_t *gbefore, int64_t *gcount, int64_t *gtop, const int64_t *gmap,
                const uint64_t *r_bits, const int64_t *r_pre, const int64_t *r_cnt, const int64_t *r_top,
                const float *r_w, const float *r_sig, const uint8_t *r_alive, int64_t S, const double *coef,
-               double thr, int64_t *nearest, int threads);
+               double thr, int64_t *nearest, int exclusive, int neatc, int recur_split, int one_on,
+               double one_prob, double re_prob, double clone_link_prob, int threads);
 void breed_f64(const double *pw, const uint8_t *pc, const uint8_t *pe, const uint8_t *pn, const double *ps,
                const int64_t *a_idx, const int64_t *b_idx, const uint8_t *do_cross, const uint8_t *active,
                double *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, double *cs, int64_t *src, int64_t *dst,
@@ -34,7 +35,8 @@ void breed_f64(const double *pw, const uint8_t *pc, const uint8_t *pe, const uin
                uint64_t *gbits, int64_t *gbefore, int64_t *gcount, int64_t *gtop, const int64_t *gmap,
                const uint64_t *r_bits, const int64_t *r_pre, const int64_t *r_cnt, const int64_t *r_top,
                const double *r_w, const double *r_sig, const uint8_t *r_alive, int64_t S, const double *coef,
-               double thr, int64_t *nearest, int threads);
+               double thr, int64_t *nearest, int exclusive, int neatc, int recur_split, int one_on,
+               double one_prob, double re_prob, double clone_link_prob, int threads);
 /* speciate's assignment: the closest living representative within thr, else found a species. */
 void assign_species_f32(const uint64_t *g_bits, const int64_t *g_pre, const int64_t *g_cnt,
                         const int64_t *g_top, const float *g_w, const float *g_sig, const int64_t *g_map,

@@ -1,7 +1,7 @@
 /* Whole episodes in one native call (evolution.episodes): a controller's C kernel and a task's
-   native plant step (snn_torch/csrc/native_plant.h) in one loop, every control step,
+   native plant step (snn_torch/kernels/csrc/native_plant.h) in one loop, every control step,
    termination, returns and the dropping of finished rows in C. Every function here is exported;
-   snn_torch._cbuild reads these prototypes to declare the ctypes signatures.
+   snn_torch.kernels.build reads these prototypes to declare the ctypes signatures.
 
    Common arguments. Plant: step_fn and observe_fn (the plant's functions for its state dtype,
    plant_bytes 4 or 8 per element), plant_params, width (state columns), starts [start_rows][width]

@@ -49,7 +49,7 @@ void select_parents(const double *fitness, const int64_t *species, const uint8_t
                     const int64_t *counts, const int64_t *keys, const int64_t *base, int64_t R, int64_t P,
                     int64_t S, float survival, int64_t elitism, int64_t elitism_min, double inter_prob,
                     double cross_prob, int64_t *first, int64_t *second, uint8_t *do_cross, uint8_t *elite,
-                    int threads) {
+                    const uint8_t *champions, int threads) {
     _Pragma("omp parallel for schedule(static) num_threads(threads)")
     for (int64_t r = 0; r < R; ++r) {
         const double *f = fitness + r * P;
@@ -102,6 +102,10 @@ void select_parents(const double *fitness, const int64_t *species, const uint8_t
             first[row] = cross && second_fitter ? p2 : p1;
             second[row] = cross ? (second_fitter ? p1 : p2) : p1;
             do_cross[row] = (uint8_t)cross; elite[row] = (uint8_t)is_elite;
+            if (champions && champions[r]) { /* delta coding: clones of the champion, the last as it is */
+                first[row] = second[row] = order[o_start]; do_cross[row] = 0;
+                elite[row] = pos == cnt[os] - 1;
+            }
         }
         free(buf);
     }
@@ -155,24 +159,41 @@ static double share_scale(const double *f, int64_t P) {
     return top > DBL_MAX / (4.0 * (double)P) ? ldexp(1.0, -e) : 1.0;
 }
 
-/* reproduce's update_stagnation then allocate_offspring, run by run, with the reference's
-   arithmetic: species' best fitness, stagnation, the species_elitism best species protected
-   (stable descending order), then offspring by explicit fitness sharing and largest remainder.
-   The shares' total is summed in slot order, as the reference's cumsum. */
+/* Each living species' place among the living (reproduce.species_order): its best fitness sf
+   descending, ties by slot; -1 for the dead. */
+static void rank_living(const uint8_t *al, const double *sf, int64_t S, int64_t *rank) {
+    for (int64_t s = 0; s < S; ++s) {
+        rank[s] = -1;
+        if (!al[s]) continue;
+        int64_t k = 0;
+        for (int64_t t = 0; t < S; ++t) k += al[t] && (sf[t] > sf[s] || (sf[t] == sf[s] && t < s));
+        rank[s] = k;
+    }
+}
+/* reproduce's species_offspring (species_records, allocate_offspring, population_stagnation),
+   run by run, with the reference's arithmetic: species' best fitness, obliteration, stagnation,
+   the species_elitism best species protected (stable descending order), stagnant species removed
+   or penalised, then offspring by explicit fitness sharing and largest remainder, then the run's
+   record and delta coding. The shares' total is summed in slot order, as the reference's cumsum. */
 void species_offspring(const double *fitness, const int64_t *species, const uint8_t *alive,
-                       const double *best_in, const int64_t *last_in, int64_t R, int64_t P, int64_t S,
-                       int64_t generation, int64_t max_stagnation, int64_t species_elitism,
-                       double *best_out, int64_t *last_out, uint8_t *survivors, int64_t *counts, int threads) {
+                       const double *best_in, const int64_t *last_in, const int64_t *created,
+                       const uint8_t *obl_in, const double *run_best_in, const int64_t *run_stale_in,
+                       int64_t R, int64_t P, int64_t S, int64_t generation, int64_t max_stagnation,
+                       int64_t species_elitism, double penalty, int64_t obliterate_interval,
+                       int64_t obliterate_min_age, int64_t pop_stagnation, double *best_out, int64_t *last_out,
+                       uint8_t *obl_out, double *run_best_out, int64_t *run_stale_out, uint8_t *survivors,
+                       int64_t *counts, uint8_t *delta, int threads) {
     _Pragma("omp parallel for schedule(static) num_threads(threads)")
     for (int64_t r = 0; r < R; ++r) {
         const double *f = fitness + r * P;
         const int64_t *sp = species + r * P;
         const uint8_t *al = alive + r * S;
         double *best = best_out + r * S; int64_t *last = last_out + r * S, *cnt = counts + r * S;
-        uint8_t *sv = survivors + r * S;
-        double *buf = malloc(5 * S * sizeof(double) + S);
+        uint8_t *sv = survivors + r * S, *obl = obl_out + r * S;
+        double *buf = malloc(6 * S * sizeof(double) + 2 * S);
         double *sf = buf, *size = buf + S, *total_f = buf + 2 * S, *share = buf + 3 * S, *frac = buf + 4 * S;
-        uint8_t *prot = (uint8_t *)(buf + 5 * S); /* protected from stagnation */
+        int64_t *rank = (int64_t *)(buf + 5 * S); /* among the living: sf descending, ties by slot */
+        uint8_t *prot = (uint8_t *)(buf + 6 * S), *pen = prot + S; /* protected; penalised */
         double f_min = INFINITY;
         const double scale = share_scale(f, P);
         for (int64_t s = 0; s < S; ++s) { sf[s] = -INFINITY; size[s] = 0.0; total_f[s] = 0.0; }
@@ -183,10 +204,22 @@ void species_offspring(const double *fitness, const int64_t *species, const uint
             if (f[p] < f_min) f_min = f[p];
         }
         f_min *= scale;
+        int64_t n_alive = 0;
         for (int64_t s = 0; s < S; ++s) {
             const int improved = al[s] && sf[s] > best_in[r * S + s];
             best[s] = improved ? sf[s] : best_in[r * S + s];
             last[s] = improved ? generation : last_in[r * S + s];
+            obl[s] = obl_in[r * S + s];
+            n_alive += al[s] != 0;
+        }
+        if (obliterate_interval > 0 && (generation + 1) % obliterate_interval == 0 && n_alive > 0) {
+            rank_living(al, sf, S, rank);
+            int64_t pick = -1, at = -1; /* the worst old enough, else the best */
+            for (int64_t s = 0; s < S; ++s)
+                if (al[s] && (rank[s] == 0 || generation - created[r * S + s] + 1 >= obliterate_min_age) && rank[s] > at) {
+                    pick = s; at = rank[s];
+                }
+            obl[pick] = 1;
         }
         /* protected: the species_elitism first in (alive ? sf : -inf) descending, ties by slot */
         memset(prot, 0, S);
@@ -201,12 +234,14 @@ void species_offspring(const double *fitness, const int64_t *species, const uint
         }
         int any_share = 0;
         for (int64_t s = 0; s < S; ++s) {
-            const int stagnant = al[s] && generation - last[s] >= max_stagnation;
-            sv[s] = al[s] && (!stagnant || prot[s]);
+            const int stagnant = al[s] && (generation - last[s] >= max_stagnation || obl[s]);
+            if (penalty > 0.0) { sv[s] = al[s]; pen[s] = stagnant && !prot[s]; }
+            else { sv[s] = al[s] && (!stagnant || prot[s]); pen[s] = 0; }
         }
         f_min = f_min > 0.0 ? 0.0 : f_min;
         for (int64_t s = 0; s < S; ++s) {
             double v = sv[s] ? total_f[s] / (size[s] < 1.0 ? 1.0 : size[s]) - f_min : 0.0;
+            v = pen[s] ? v * penalty : v;
             share[s] = v < 0.0 ? 0.0 : v;
             any_share |= share[s] > 0.0;
         }
@@ -224,9 +259,26 @@ void species_offspring(const double *fitness, const int64_t *species, const uint
         const int64_t remainder = (int64_t)round((double)P - base_sum);
         for (int64_t s = 0; s < S; ++s) {
             if (!sv[s]) { cnt[s] = 0; continue; }
-            int64_t rank = 0; /* position in frac descending, ties by slot */
-            for (int64_t t = 0; t < S; ++t) rank += frac[t] > frac[s] || (frac[t] == frac[s] && t < s);
-            cnt[s] += rank < remainder;
+            int64_t k = 0; /* position in frac descending, ties by slot */
+            for (int64_t t = 0; t < S; ++t) k += frac[t] > frac[s] || (frac[t] == frac[s] && t < s);
+            cnt[s] += k < remainder;
+        }
+        /* the run's record; delta coding */
+        double top = -INFINITY;
+        for (int64_t p = 0; p < P; ++p) top = f[p] > top ? f[p] : top;
+        const int better = top > run_best_in[r];
+        run_best_out[r] = better ? top : run_best_in[r];
+        run_stale_out[r] = better ? 0 : run_stale_in[r] + 1;
+        delta[r] = pop_stagnation > 0 && run_stale_out[r] >= pop_stagnation;
+        if (delta[r]) {
+            rank_living(al, sf, S, rank);
+            run_stale_out[r] = 0;
+            for (int64_t s = 0; s < S; ++s) {
+                const int first = al[s] && rank[s] == 0, second = al[s] && rank[s] == 1;
+                cnt[s] = first ? (n_alive >= 2 ? P / 2 : P) : (second ? P - P / 2 : 0);
+                sv[s] = first || second;
+                if (first || second) last[s] = generation;
+            }
         }
         free(buf);
     }

@@ -4,7 +4,7 @@ torch's CPU ``sin``, ``cos`` and ``exp`` (SLEEF, vectorised) and the C library's
 round differently in about 1 case in 100 to 1000, and CUDA's differ again. A plant or a
 decoder that a C kernel runs as well as torch must not depend on which one ran it, so both
 use these: the same float64 operations, in the same order, each rounded as IEEE 754 says (no
-fused multiply-add; the C twin, ``snn_torch/csrc/portable_math.h``, is built with
+fused multiply-add; the C twin, ``snn_torch/kernels/csrc/portable_math.h``, is built with
 ``-ffp-contract=off``). Inputs of float32 are computed in float64 and rounded once at the end.
 
 Accuracy (float64, tested against Python's ``math``, i.e. the C library): sin and cos are

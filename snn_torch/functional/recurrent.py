@@ -10,7 +10,7 @@ The synaptic sum runs over presynaptic slots in ascending order (``ordered_synap
 not as a matmul: a matmul's blocking, and so its rounding, depends on the batch and matrix
 sizes, and a network's result must not depend on the batch it shares or on how many node
 slots the batch simulates (an unused slot adds exact zeros). The C kernel
-(``snn_torch.functional.network_kernel``) sums in the same order and equals this step bit for bit.
+(``snn_torch.kernels.network``) sums in the same order and equals this step bit for bit.
 
 The state may carry extra batch axes between ``P`` and ``N`` (``[P, B, N]``), for example
 several episodes per network.

@@ -23,7 +23,7 @@ from snn_torch.functional.counter_rng import BernoulliSources
 from snn_torch.functional.decode import bang_bang_force, sigmoid_force
 from snn_torch.functional.scalars import scalar
 
-__all__ = ["CurrentEncoder", "BernoulliEncoder", "RateWindow", "RateWindowState", "SigmoidForce", "BangBang",
+__all__ = ["CurrentEncoder", "BernoulliEncoder", "RateWindow", "RateWindowState", "SigmoidForce", "UnitForce", "BangBang",
            "LinearReadout"]
 
 
@@ -135,6 +135,20 @@ class SigmoidForce(nn.Module):
 
     def forward(self, drive: Tensor, sigma: Tensor | float = 1.0) -> Tensor:
         return sigmoid_force(drive, sigma, f_max=self.f_max)
+
+    def extra_repr(self) -> str:
+        return f"f_max={self.f_max} (N)"
+
+
+class UnitForce(nn.Module):
+    """A unit output ``y`` in [0, 1] as a force ``F = f_max (2 y - 1)`` (N): sigmoid NEAT's readout."""
+
+    def __init__(self, f_max: float = 10.0) -> None:
+        super().__init__()
+        self.f_max = _finite("f_max", f_max, positive=True)
+
+    def forward(self, y: Tensor) -> Tensor:
+        return self.f_max * (2.0 * y - 1.0)
 
     def extra_repr(self) -> str:
         return f"f_max={self.f_max} (N)"

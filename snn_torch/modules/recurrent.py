@@ -11,8 +11,8 @@ Two ways to run them:
   current held for ``substeps`` substeps, spikes counted. Rows map to networks by an index
   (``network=``), so several episodes share a network and finished episodes can be dropped
   without copying weights. On the CPU this runs the C kernel
-  (``snn_torch.functional.network_kernel``), on CUDA a compiled step
-  (``snn_torch.compiled``), else the torch step; all three give the same results (the first
+  (``snn_torch.kernels.network``), on CUDA a compiled step
+  (``snn_torch.kernels.compiled``), else the torch step; all three give the same results (the first
   two bit for bit against the torch step on the CPU, tested).
 """
 
@@ -21,7 +21,6 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from snn_torch.compiled import CompiledSubstep
 from snn_torch.functional.counter_rng import BernoulliSources
 from snn_torch.functional.decode import ordered_matvec, ordered_sigmoid
 from snn_torch.functional.izhikevich import (
@@ -34,7 +33,6 @@ from snn_torch.functional.izhikevich import (
     check_method,
     check_params,
 )
-from snn_torch.functional.network_kernel import check_network_index, kernel_supports, network_steps_kernel
 from snn_torch.functional.recurrent import (
     RecurrentState,
     masked_weights,
@@ -43,12 +41,14 @@ from snn_torch.functional.recurrent import (
     recurrent_izhikevich_steps,
 )
 from snn_torch.functional.scalars import scalar
-from snn_torch.functional.sigmoid_kernel import (
+from snn_torch.functional.threshold import SpikeFn, heaviside
+from snn_torch.kernels.compiled import CompiledSubstep
+from snn_torch.kernels.network import check_network_index, kernel_supports, network_steps_kernel
+from snn_torch.kernels.sigmoid import (
     SIGMOID_MAX_NODES,
     sigmoid_kernel_supports,
     sigmoid_update_kernel,
 )
-from snn_torch.functional.threshold import SpikeFn, heaviside
 
 __all__ = ["PopulationRecurrentIzhikevich", "PopulationRecurrentSigmoid", "BACKENDS"]
 
@@ -309,7 +309,7 @@ class PopulationRecurrentSigmoid(_PopulationNetwork):
     ``control_step(inputs [B, num_clamped], values [B, N], updates=1, network=None)`` returns
     the node values after ``updates`` updates (values start at 0: ``initial_state``). ``backend``:
     ``"auto"`` runs the updates in C on the CPU where it can
-    (``snn_torch.functional.sigmoid_kernel``), ``"kernel"`` insists,
+    (``snn_torch.kernels.sigmoid``), ``"kernel"`` insists,
     ``"torch"`` never: the same bits either way.
     """
 

@@ -1,4 +1,4 @@
-/* The native step of tasks.acrobot.AcrobotTask (snn_torch/csrc/native_plant.h): gymnasium's
+/* The native step of tasks.acrobot.AcrobotTask (snn_torch/kernels/csrc/native_plant.h): gymnasium's
    Acrobot-v1 (book dynamics), the torch step's operations in its order (tasks.acrobot:
    acrobot_dsdt, acrobot_step, wrap), sin and cos from portable_math.h. params: dt, dt / 2,
    dt / 6 (s), pi, the velocity bounds (rad/s), the wrap's most turns, then _dsdt's fifteen

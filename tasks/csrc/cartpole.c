@@ -1,4 +1,4 @@
-/* The native step of tasks.cartpole.CartPoleTask (snn_torch/csrc/native_plant.h): Qiu et al.'s
+/* The native step of tasks.cartpole.CartPoleTask (snn_torch/kernels/csrc/native_plant.h): Qiu et al.'s
    frictionless cart-pole, one explicit Euler step per control step, the torch step's operations
    in its order (tasks.cartpole.cartpole_step), sin and cos from portable_math.h.
    params: gravity, cart mass, pole mass, half length, x limit, theta limit, tau (s), then the

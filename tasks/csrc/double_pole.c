@@ -1,4 +1,4 @@
-/* The native step of tasks.double_pole.DoublePoleTask (snn_torch/csrc/native_plant.h): one control
+/* The native step of tasks.double_pole.DoublePoleTask (snn_torch/kernels/csrc/native_plant.h): one control
    step of double-pole plants (Runge-Kutta, failure test, steps balanced, Gruau's damping terms and
    fitness). State [rows][7 + window]: x, x_dot, theta1, theta1_dot, theta2, theta2_dot, steps
    balanced, the damping ring. params: gravity, cart mass, pole 1 mass, pole 1 half length, pole 2

@@ -1,4 +1,4 @@
-/* The native step of tasks.gym_cartpole.GymCartPoleTask (snn_torch/csrc/native_plant.h):
+/* The native step of tasks.gym_cartpole.GymCartPoleTask (snn_torch/kernels/csrc/native_plant.h):
    gymnasium's CartPole-v1, the torch step's operations in its order
    (tasks.gym_cartpole.gym_cartpole_step), sin and cos from portable_math.h. params: force
    magnitude (N), pole mass x half length (kg m), total mass (kg), gravity (m/s^2), half length

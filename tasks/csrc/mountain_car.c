@@ -1,4 +1,4 @@
-/* The native steps of tasks.mountain_car (snn_torch/csrc/native_plant.h): gymnasium's
+/* The native steps of tasks.mountain_car (snn_torch/kernels/csrc/native_plant.h): gymnasium's
    MountainCar-v0 (prefix mountain_car) and MountainCarContinuous-v0 (prefix
    mountain_car_continuous), the torch steps' operations in their order
    (tasks.mountain_car.mountain_car_step, mountain_car_continuous_step), cos from

@@ -1,4 +1,4 @@
-/* The native step of tasks.pendulum.PendulumTask (snn_torch/csrc/native_plant.h): gymnasium's
+/* The native step of tasks.pendulum.PendulumTask (snn_torch/kernels/csrc/native_plant.h): gymnasium's
    Pendulum-v1, the torch step's operations in its order (tasks.pendulum.pendulum_step), sin and
    cos from portable_math.h. params: 3 g / (2 l), 3 / (m l^2), dt (s), max speed (rad/s), max
    torque (N m), the speed and torque cost weights, pi, 2 pi, and 1 if theta_dot is observed. The

@@ -1,4 +1,4 @@
-/* Test-only exports of snn_torch/csrc/portable_math.h over arrays (tests/snn_torch/test_portable_math.py). */
+/* Test-only exports of snn_torch/kernels/csrc/portable_math.h over arrays (tests/snn_torch/test_portable_math.py). */
 #include <stdint.h>
 
 void probe_sincos(const double *x, double *s, double *c, int64_t n);

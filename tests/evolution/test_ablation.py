@@ -7,7 +7,7 @@ from evolution import NEAT
 from evolution.ablation import StaticMapController
 from evolution.phenotype import SigmoidSpec, make_controller
 from tasks.double_pole import DoublePoleTask
-from tasks.experiments.double_pole import study_config, study_fitness, study_task
+from tasks.studies.double_pole import study_config, study_fitness, study_task
 
 
 def _evolved(kind: str):
@@ -28,7 +28,7 @@ def _forces(controller, obs_a, obs_b):
 @pytest.mark.parametrize("kind", ["snn", "sigmoid"])
 def test_a_static_map_answers_an_observation_the_same_whatever_came_before(kind):
     genomes, cfg = _evolved(kind)
-    controller = make_controller(genomes, cfg, study_task("dpnv"), kind=kind)
+    controller = make_controller(genomes, cfg, study_task("dpnv"), kind)
     P = genomes.pop_size
     a, b = torch.tensor([[0.55, 0.45, 0.5]]).expand(P, 3), torch.tensor([[0.2, 0.9, 0.1]]).expand(P, 3)
     first, again = _forces(StaticMapController(controller, 5), a, b)
@@ -44,7 +44,7 @@ def test_a_direct_sigmoid_net_is_its_own_static_map():
     task = DoublePoleTask.with_velocities(max_steps=200, observation_bounds=study_task("dpv").observation_high)
     from evolution.rollout import rollout
 
-    controller = make_controller(genomes, cfg, task, SigmoidSpec(), kind="sigmoid")
+    controller = make_controller(genomes, cfg, task, SigmoidSpec())
     as_evolved = rollout(task, controller).steps
     static = rollout(task, StaticMapController(controller, 1)).steps
     assert torch.equal(as_evolved, static) and int(as_evolved.max()) > 1

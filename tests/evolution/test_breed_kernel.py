@@ -10,15 +10,23 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from evolution import breed_kernel, kernel_tests, select_kernel
+from evolution import breed_kernel, select_kernel
 from evolution.distance import distance, gene_stats
 from evolution.neat import NEAT
-from evolution.reproduce import _rep_nodes, allocate_offspring, reproduce, select_parents, update_stagnation
+from evolution.reproduce import (
+    _rep_nodes,
+    allocate_offspring,
+    reproduce,
+    select_parents,
+    species_offspring,
+    update_stagnation,
+)
 from evolution.rng import RunRNG, _cos_2pi, _log_unit, _sqrt, box_muller
 from evolution.speciate import SpeciesState, empty_species, speciate
-from snn_torch._cbuild import kernels_enabled
-from tasks.experiments.cartpole import controller_config
-from tasks.xor import XOR_CONFIG
+from snn_torch.kernels.build import kernels_enabled
+from tasks.studies.cartpole import controller_config
+from tasks.studies.xor import XOR_CONFIG
+from tests.evolution import kernel_entry_points as kernel_tests
 from tests.evolution.helpers import population, small_config
 
 needs_kernel = pytest.mark.skipif(not breed_kernel.kernel_available(), reason="no C compiler: kernels unavailable")
@@ -64,14 +72,34 @@ def test_kernel_breeds_the_same_generations_as_the_tensor_operators(setting, dty
     assert int(ref.species_state.alive.sum(1).min()) > 1
 
 
+# [NEATC] mechanisms (evolution.neat121): off (the defaults) or on, in any combination.
+NEAT121_OPTIONS = st.fixed_dictionaries({
+    "stagnant_fitness_factor": st.sampled_from([0.0, 0.0, 0.01, 0.5]),
+    "max_stagnation": st.sampled_from([15, 1, 2]),
+    "species_elitism": st.sampled_from([2, 0]),
+    "obliterate_interval": st.sampled_from([0, 0, 2, 3]),
+    "obliterate_min_age": st.sampled_from([1, 2, 20]),
+    "population_stagnation": st.sampled_from([0, 0, 1, 2]),
+    "mutation_exclusive": st.booleans(),
+    "mate_only_prob": st.sampled_from([0.0, 0.0, 0.2, 1.0]),
+    "weight_mutate_neatc": st.booleans(),
+    "crossover_average_prob": st.sampled_from([0.0, 0.0, 0.4, 1.0]),
+    "conn_add_recurrence": st.booleans(),
+    "recur_only_prob": st.sampled_from([0.0, 0.2, 1.0]),
+    "toggle_enable_prob": st.sampled_from([0.0, 0.0, 0.1, 1.0]),
+    "gene_reenable_prob": st.sampled_from([0.0, 0.0, 0.05, 1.0]),
+})
+
+
 @needs_kernel
 @settings(max_examples=25, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), feed_forward=st.booleans(), node_add=st.sampled_from([0.3, 1.0]),
-       per_gene=st.booleans(), generations=st.integers(1, 6))
-def test_kernel_matches_reference_on_small_populations(seed, feed_forward, node_add, per_gene, generations):
+       per_gene=st.booleans(), generations=st.integers(1, 6), neat121=NEAT121_OPTIONS)
+def test_kernel_matches_reference_on_small_populations(seed, feed_forward, node_add, per_gene, generations, neat121):
     # Tiny node capacity and node_add 1.0: splits are refused for want of a slot.
     cfg = small_config(feed_forward=feed_forward, node_add_prob=node_add, conn_add_prob=0.5,
-                       enabled_mutate_rate=0.1, weight_mutate_per_gene=per_gene)
+                       enabled_mutate_rate=0.1, weight_mutate_per_gene=per_gene and not neat121["weight_mutate_neatc"],
+                       **neat121)
     out = []
     for fused in (False, True):
         g, rng = population(cfg, seeds=(seed, seed + 1))
@@ -166,6 +194,38 @@ def test_species_kernel_equals_stagnation_then_allocation(seed, pop, slots, fitn
     assert torch.equal(survivors, ref_survivors)
     assert torch.equal(counts, ref_counts)
     assert (counts.sum(1) == torch.where(survivors.any(1), pop, 0)).all()
+
+
+@needs_kernel
+@settings(max_examples=80, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), pop=st.integers(2, 160), slots=st.integers(1, 40),
+       tied=st.booleans(), generation=st.integers(0, 40), neat121=NEAT121_OPTIONS)
+def test_species_kernel_equals_the_reference_with_the_neat121_mechanisms(seed, pop, slots, tied, generation,
+                                                                         neat121):
+    # Penalised or removed stagnant species, obliteration (old and young species, marks
+    # carried in), the run's record and delta coding, over tied and untied fitness.
+    cfg = small_config(pop_size=pop, **neat121)
+    g = torch.Generator().manual_seed(seed)
+    R = 4
+    species = torch.randint(0, slots, (R, pop), generator=g)
+    fitness = (torch.randint(0, 4, (R, pop), generator=g).double() if tied
+               else torch.rand(R, pop, generator=g, dtype=torch.float64))
+    sp = empty_species(R, 2, slots, device=torch.device("cpu"), dtype=torch.float32)
+    sp.alive[:] = torch.rand(R, slots, generator=g) < 0.8
+    sp.alive.scatter_(1, species, True)
+    sp.best_fitness[:] = torch.where(torch.rand(R, slots, generator=g) < 0.3, -torch.inf,
+                                     torch.rand(R, slots, generator=g, dtype=torch.float64))
+    sp.last_improved[:] = torch.randint(-30, generation + 1, (R, slots), generator=g)
+    sp.created[:] = torch.randint(-30, generation + 1, (R, slots), generator=g)
+    sp.obliterated[:] = torch.rand(R, slots, generator=g) < 0.1
+    sp.run_best[:] = torch.rand(R, generator=g, dtype=torch.float64) * 1.2
+    sp.run_stale[:] = torch.randint(0, 4, (R,), generator=g)
+    ref = species_offspring(fitness, species, sp, cfg, generation)
+    fast = select_kernel.species_state_offspring(fitness, species, sp, cfg, generation)
+    for name, t in ref[0].tensors().items():
+        assert torch.equal(t, getattr(fast[0], name)), name
+    assert torch.equal(ref[1], fast[1]) and torch.equal(ref[2], fast[2]) and torch.equal(ref[3], fast[3])
+    assert (ref[2].sum(1) == torch.where(ref[1].any(1), pop, 0)).all()
 
 
 @needs_kernel

@@ -87,3 +87,23 @@ def test_cross_field_checks():
     with pytest.raises(ConfigError, match="sigma_min_value"):
         NEATConfig(sigma_min_value=2.0, sigma_max_value=1.0)
     assert dataclasses.replace(NEATConfig(), pop_size=10).pop_size == 10
+
+
+def test_neat121_options_default_off_and_read_from_ini(tmp_path):
+    # NEAT C++ 1.2.1's mechanisms (evolution.neat121): off by default, any INI can turn them on.
+    cfg = NEATConfig()
+    assert (cfg.stagnant_fitness_factor, cfg.obliterate_interval, cfg.population_stagnation, cfg.mate_only_prob,
+            cfg.crossover_average_prob, cfg.recur_only_prob, cfg.toggle_enable_prob, cfg.gene_reenable_prob) == (
+        0.0, 0, 0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    assert not (cfg.mutation_exclusive or cfg.weight_mutate_neatc or cfg.conn_add_recurrence)
+    path = tmp_path / "neatc.ini"
+    path.write_text("[NEAT]\nstagnant_fitness_factor = 0.01\nobliterate_interval = 30\npopulation_stagnation = 20\n"
+                    "mutation_exclusive = true\nweight_mutate_neatc = yes\nmate_only_prob = 0.2\n"
+                    "conn_add_recurrence = on\nrecur_only_prob = 0.2\n")
+    read = NEATConfig.from_ini(path)
+    assert (read.stagnant_fitness_factor, read.obliterate_interval, read.population_stagnation) == (0.01, 30, 20)
+    assert read.mutation_exclusive and read.weight_mutate_neatc and read.conn_add_recurrence
+    assert NEATConfig(**read.to_dict()) == read
+    path.write_text("[NEAT]\npopulation_stagnation = 2.5\n")
+    with pytest.raises(ConfigError, match="population_stagnation"):
+        NEATConfig.from_ini(path)

@@ -6,7 +6,7 @@ import torch
 from evolution import NEATConfig, SpikingSpec
 from evolution.phenotype import SpikingController
 from evolution.population import Genomes
-from snn_torch.functional.network_kernel import kernel_available
+from snn_torch.kernels.network import kernel_available
 
 pytestmark = pytest.mark.skipif(not kernel_available(), reason="no C compiler: the kernel path does not exist")
 
@@ -80,7 +80,7 @@ def test_kernel_step_checks_observations_and_network_indices():
 
 def test_rate_control_kernel_refuses_what_it_would_misread():
     from snn_torch.functional.izhikevich import QIU2019
-    from snn_torch.functional.network_kernel import RateControlKernel
+    from snn_torch.kernels.network import RateControlKernel
 
     w, iconst, w_out = torch.zeros(3, 5, 5), torch.zeros(5), torch.zeros(3, 5, 2)
     common = dict(dt_ms=0.5, substeps=20, gain=60.0, bernoulli=False, rest=None)

@@ -9,7 +9,7 @@ ray = pytest.importorskip("ray")
 
 from evolution import NEAT  # noqa: E402
 from evolution.distributed import RayFitness, split_genomes  # noqa: E402
-from tasks.experiments.cartpole import controller_config, markov_config, markov_fitness, nonmarkov_fitness  # noqa: E402
+from tasks.studies.cartpole import controller_config, markov_config, markov_fitness, nonmarkov_fitness  # noqa: E402
 
 
 @pytest.fixture(scope="module")

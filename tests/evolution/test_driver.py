@@ -13,7 +13,7 @@ from evolution.config import ConfigError
 from evolution.neat import NEAT, FitnessError
 from evolution.population import check_invariants
 from evolution.reporters import Checkpointer, StatisticsReporter
-from tasks.xor import XOR_CONFIG, xor_fitness
+from tasks.studies.xor import XOR_CONFIG, xor_fitness
 from tests.evolution.helpers import small_config
 
 CFG = small_config(pop_size=30, max_hidden=6, node_add_prob=0.2, conn_add_prob=0.3)
@@ -68,7 +68,7 @@ def test_reproduction_in_run_chunks_equals_one_chunk():
 
 def test_solved_runs_freeze_and_match_running_alone():
     # XOR: runs solve at different generations, then stop evolving; the others go on.
-    from tasks.xor import xor_solved
+    from tasks.studies.xor import xor_solved
 
     seeds = [1, 2, 3, 4, 5, 6]
     solved_fn = lambda g, f: xor_solved(g)  # noqa: E731
@@ -235,8 +235,8 @@ def test_complete_extinction_restarts_the_run():
     extinct = []
 
     class Watch(StatisticsReporter):
-        def complete_extinction(self, neat, runs):
-            extinct.extend(runs)
+        def complete_extinction(self, status):
+            extinct.extend(status.extinct)
 
     neat.add_reporter(Watch())
     neat.run(lambda g: torch.zeros(2, 20, dtype=torch.float64), 4)  # nothing ever improves

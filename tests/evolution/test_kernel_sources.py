@@ -7,8 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from evolution import breed_kernel, kernel_tests, rng, select_kernel
-from snn_torch._cbuild import parse_prototypes
+from evolution import breed_kernel, rng, select_kernel
+from snn_torch.kernels.build import parse_prototypes
+from tests.evolution import kernel_entry_points as kernel_tests
 
 CSRC = Path(rng.__file__).resolve().parent / "csrc"
 

@@ -19,8 +19,9 @@ from evolution.phenotype import SigmoidSpec, SpikingSpec
 from evolution.population import Genomes
 from evolution.task import NativeStep
 from tasks.cartpole import CartPoleTask
-from tasks.double_pole import DoublePoleTask, generalization_starts
-from tasks.experiments.cartpole import PAPER_SPECS, controller_config, markov_config
+from tasks.double_pole import DoublePoleTask
+from tasks.studies.cartpole import PAPER_SPECS, controller_config, markov_config
+from tasks.studies.generalization import generalization_starts
 
 _TEST_CSRC = Path(__file__).resolve().parent.parent / "csrc"
 
@@ -43,14 +44,14 @@ def _as(genomes, dtype):
 
 def _both(task, genomes, cfg, spec, kind, **kwargs):
     """``(native, python loop)`` rollouts of one population (fresh controllers: no shared state)."""
-    controller = make_controller(genomes, cfg, task, spec, kind=kind)
+    controller = make_controller(genomes, cfg, task, spec)
     episodes = kwargs.get("episodes", 1)
     starts = kwargs.get("starts")
     if starts is None:
         starts = episode_starts(task, episodes, kwargs.get("seed", 0), dtype=controller.weight.dtype)
     assert native_rollout(task, controller, starts, episodes=episodes, max_steps=task.max_steps) is not None
-    native = rollout(task, make_controller(genomes, cfg, task, spec, kind=kind), **kwargs)
-    python = rollout(task, make_controller(genomes, cfg, task, spec, kind=kind), native=False, **kwargs)
+    native = rollout(task, make_controller(genomes, cfg, task, spec), **kwargs)
+    python = rollout(task, make_controller(genomes, cfg, task, spec), native=False, **kwargs)
     return native, python
 
 
@@ -188,7 +189,7 @@ def test_a_users_native_plant_runs_whole_episodes():
     native, python = _both(task, genomes, cfg, SigmoidSpec(), "sigmoid", episodes=4, seed=3)
     _assert_same(native, python)
     starts = task.reset(4, torch.Generator().manual_seed(3))
-    ctrl = make_controller(genomes, cfg, task, SigmoidSpec(), kind="sigmoid")
+    ctrl = make_controller(genomes, cfg, task, SigmoidSpec())
     assert native_rollout(task, ctrl, starts, episodes=4, max_steps=60) is not None  # it did run natively
 
 
@@ -202,7 +203,7 @@ def test_a_start_per_row_runs_natively_to_the_python_loops_bits(kind):
     assert starts.shape == (3 * cfg.pop_size * 3, 3)
     native, python = _both(task, genomes, cfg, None, kind, episodes=3, starts=starts)
     _assert_same(native, python)
-    shared = rollout(task, make_controller(genomes, cfg, task, kind=kind), episodes=3, seed=11)
+    shared = rollout(task, make_controller(genomes, cfg, task, kind), episodes=3, seed=11)
     assert not torch.equal(native.returns, shared.returns)  # the per-row starts were used
 
 
@@ -212,7 +213,7 @@ def test_a_native_step_that_disagrees_or_fails_is_caught_when_bound(mode, messag
     task = PointMass(mode)
     cfg, genomes = _point_mass_genomes()
     with pytest.raises(TaskError, match=message) as info:
-        rollout(task, make_controller(genomes, cfg, task, SigmoidSpec(), kind="sigmoid"), episodes=2)
+        rollout(task, make_controller(genomes, cfg, task, SigmoidSpec()), episodes=2)
     assert task.name in str(info.value)
 
 
@@ -230,7 +231,7 @@ def test_a_native_step_that_crashes_is_reported_where_it_is_bound(tmp_path):
         "from evolution.phenotype import SigmoidSpec\n"
         "task = PointMass(4)\n"
         "cfg, genomes = _point_mass_genomes()\n"
-        "rollout(task, make_controller(genomes, cfg, task, SigmoidSpec(), kind='sigmoid'), episodes=2)\n"
+        "rollout(task, make_controller(genomes, cfg, task, SigmoidSpec()), episodes=2)\n"
         "print('survived')\n")
     proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
     assert proc.returncode == -signal.SIGSEGV and "survived" not in proc.stdout
@@ -243,7 +244,7 @@ def test_nan_reward_in_a_native_episode_names_the_task_and_row():
     messages = []
     for native in (True, False):
         with pytest.raises(TaskError, match=r"step\(\) returned reward holding NaN or inf") as info:
-            rollout(task, make_controller(genomes, cfg, task, SigmoidSpec(), kind="sigmoid"), episodes=3, seed=1,
+            rollout(task, make_controller(genomes, cfg, task, SigmoidSpec()), episodes=3, seed=1,
                     native=native)
         messages.append(str(info.value))
     assert all("'point-mass-3'" in m and "(genome " in m for m in messages)
@@ -294,7 +295,7 @@ def test_the_static_map_ablation_runs_natively_with_the_same_bits(kind, spec):
     cfg = markov_config(kind) if markov else controller_config(kind)
     task = CartPoleTask.markov(max_steps=150) if markov else CartPoleTask.nonmarkov(max_steps=150)
     genomes = _genomes(cfg)
-    maps = [StaticMapController(make_controller(genomes, cfg, task, spec, kind=kind), 3) for _ in range(2)]
+    maps = [StaticMapController(make_controller(genomes, cfg, task, spec), 3) for _ in range(2)]
     starts = episode_starts(task, 2, 0)
     assert native_rollout(task, maps[0], starts, episodes=2, max_steps=150) is not None
     native = rollout(task, maps[0], episodes=2)
@@ -311,5 +312,5 @@ def test_nan_in_the_state_a_step_returns_is_caught_on_both_paths():
     for native in (True, False):
         for max_steps in (60, 10):  # step 10 is the last one in the second case
             with pytest.raises(TaskError, match=r"'point-mass-5': step\(\) returned state holding NaN or inf"):
-                rollout(task, make_controller(genomes, cfg, task, SigmoidSpec(), kind="sigmoid"), episodes=3, seed=1,
+                rollout(task, make_controller(genomes, cfg, task, SigmoidSpec()), episodes=3, seed=1,
                         native=native, max_steps=max_steps)

@@ -14,6 +14,7 @@ from evolution.mutate import (
     mutate_add_node,
     mutate_sigma,
     mutate_toggle_enabled,
+    mutate_toggle_one,
     mutate_weights,
 )
 from evolution.population import InvariantError, check_invariants, reachability
@@ -21,7 +22,12 @@ from evolution.reproduce import allocate_offspring, reproduce
 from evolution.speciate import empty_species, speciate
 from tests.evolution.helpers import genome_genes, population, reference_distance, small_config
 
-OPS = ["add_node", "add_conn", "weights", "sigma", "toggle", "crossover", "generation"]
+OPS = ["add_node", "add_conn", "weights", "sigma", "toggle", "toggle_one", "crossover", "generation"]
+# NEAT C++ 1.2.1's options (evolution.neat121), all on
+NEATC = dict(stagnant_fitness_factor=0.01, max_stagnation=2, species_elitism=0, obliterate_interval=2,
+             obliterate_min_age=1, population_stagnation=2, mutation_exclusive=True, mate_only_prob=0.2,
+             weight_mutate_neatc=True, crossover_average_prob=0.4, conn_add_recurrence=True, recur_only_prob=0.3,
+             toggle_enable_prob=0.5, gene_reenable_prob=0.3)
 
 
 def _apply(op, g, cfg, rng, state):
@@ -37,6 +43,8 @@ def _apply(op, g, cfg, rng, state):
         return mutate_sigma(g, cfg, rng, everyone)
     if op == "toggle":
         return mutate_toggle_enabled(g, cfg, rng, everyone)
+    if op == "toggle_one":
+        return mutate_toggle_one(g, cfg, rng, everyone)
     if op == "crossover":
         partner = g.gather(torch.roll(torch.arange(P), 1).expand(R, P).contiguous())
         return crossover(g, partner, cfg, rng, everyone)
@@ -50,10 +58,11 @@ def _apply(op, g, cfg, rng, state):
 
 @settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), ops=st.lists(st.sampled_from(OPS), min_size=1, max_size=25),
-       feed_forward=st.booleans(), self_loops=st.booleans(), node_add=st.sampled_from([0.3, 1.0]))
-def test_invariants_hold_after_every_operator(seed, ops, feed_forward, self_loops, node_add):
+       feed_forward=st.booleans(), self_loops=st.booleans(), node_add=st.sampled_from([0.3, 1.0]),
+       neatc=st.booleans())
+def test_invariants_hold_after_every_operator(seed, ops, feed_forward, self_loops, node_add, neatc):
     cfg = small_config(feed_forward=feed_forward, initial_self_loops=self_loops and not feed_forward,
-                       node_add_prob=node_add, conn_add_prob=0.5, enabled_mutate_rate=0.1)
+                       node_add_prob=node_add, conn_add_prob=0.5, enabled_mutate_rate=0.1, **(NEATC if neatc else {}))
     g, rng = population(cfg, seeds=(seed, seed + 1))
     species, sp = speciate(g, empty_species(2, cfg.num_nodes, 2, device=g.device, dtype=g.weight.dtype), cfg, rng, 0)
     state = {"species": species, "sp": sp, "gen": 0}

@@ -35,15 +35,18 @@ def test_a_spiking_config_for_a_sigmoid_controller_is_an_error_naming_the_field(
         TaskFitness(PointMass(), spiking_config(2, 1), "sigmoid")
 
 
-def test_a_kind_that_disagrees_with_the_spec_fails_at_construction():
+def test_one_argument_names_the_controller_so_it_cannot_disagree_with_itself():
     cfg = sigmoid_config(2, 1, pop_size=10)
-    with pytest.raises(ValueError, match=r"kind 'snn' disagrees with spec SigmoidSpec"):
+    assert type(TaskFitness(PointMass(), cfg, "sigmoid").spec) is SigmoidSpec  # a name: its spec's defaults
+    assert TaskFitness(PointMass(), cfg, SigmoidSpec(decoder="bang_bang")).spec.decoder == "bang_bang"
+    assert isinstance(make_controller(NEAT(cfg).ask(), cfg, PointMass(), "sigmoid"), SigmoidController)
+    assert isinstance(make_controller(NEAT(cfg).ask(), cfg, PointMass(), SigmoidSpec()), SigmoidController)
+    with pytest.raises(TypeError):  # no second argument (a kind) left to disagree with the spec
         TaskFitness(PointMass(), cfg, "snn", SigmoidSpec())
-    with pytest.raises(ValueError, match=r"kind 'sigmoid' disagrees with spec SpikingSpec"):
-        make_controller(NEAT(cfg).ask(), cfg, PointMass(), SpikingSpec(), kind="sigmoid")
-    with pytest.raises(ValueError, match=r"spec must be a SpikingSpec or a SigmoidSpec, got dict"):
+    with pytest.raises(ValueError, match=r"spec must be one of \['SpikingSpec', 'SigmoidSpec'\] or a name of "
+                                         r"\('snn', 'sigmoid'\), got dict"):
         TaskFitness(PointMass(), cfg, spec={"decoder": "bang_bang"})
-    with pytest.raises(ValueError, match=r"kind must be one of \('snn', 'sigmoid'\), got 'lif'"):
+    with pytest.raises(ValueError, match=r"a controller name must be one of \('snn', 'sigmoid'\), got 'lif'"):
         TaskFitness(PointMass(), cfg, "lif")
 
 
@@ -60,9 +63,11 @@ def test_the_spec_alone_picks_the_controller():
     spiking = task_config(task, pop_size=12)
     assert isinstance(make_controller(NEAT(spiking).ask(), spiking, task), SpikingController)
     by_spec = TaskFitness(task, cfg, spec=SigmoidSpec(decoder="bang_bang"), episodes=2)
-    by_both = TaskFitness(task, cfg, "sigmoid", SigmoidSpec(decoder="bang_bang"), episodes=2)
-    assert by_spec.kind == "sigmoid"
-    assert torch.equal(by_spec(genomes), by_both(genomes))
+    by_position = TaskFitness(task, cfg, SigmoidSpec(decoder="bang_bang"), episodes=2)
+    by_name = TaskFitness(task, cfg, "sigmoid", episodes=2)
+    assert isinstance(by_spec.spec, SigmoidSpec)
+    assert torch.equal(by_spec(genomes), by_position(genomes))
+    assert torch.equal(by_name(genomes), TaskFitness(task, cfg, SigmoidSpec(), episodes=2)(genomes))
 
 
 def test_task_config_reads_the_layout_from_the_task():
@@ -200,7 +205,7 @@ def test_the_docs_pendulum_example_evolves_and_its_random_genomes_run():
     assert small.count("range(2)") == 1 and "generations=2" in small
     namespace: dict = {}
     exec(small, namespace)
-    assert namespace["fitness"].kind == "snn" and namespace["fitness"].fresh_starts
+    assert isinstance(namespace["fitness"].spec, SpikingSpec) and namespace["fitness"].fresh_starts
     assert namespace["result"].best_fitness.shape == (2,)
     assert namespace["trace"]["action"].shape[1:] == (2, 1)
     exec(next(b for b in blocks if "random_genomes(" in b), namespace)
@@ -215,4 +220,22 @@ def test_the_readmes_quick_start_on_your_own_plant_runs():
     namespace: dict = {}
     exec(small, namespace)
     assert namespace["result"].best_fitness.shape == (4,)
-    assert namespace["config"].num_inputs == 2 and namespace["fitness"].kind == "snn"
+    assert namespace["config"].num_inputs == 2 and isinstance(namespace["fitness"].spec, SpikingSpec)
+
+
+def test_the_docs_own_controller_example_runs_through_the_seam():
+    """docs/writing-a-task.md's own controller, on its pendulum, registered and scored by TaskFitness."""
+    from evolution.phenotype import CONTROLLER_NAMES, CONTROLLERS
+
+    blocks = _doc_blocks("python")
+    namespace: dict = {}
+    pendulum = next(b for b in blocks if "class Pendulum(Task)" in b)
+    exec(pendulum.split("config = task_config")[0], namespace)  # the task only
+    try:
+        exec(next(b for b in blocks if "class ProportionalController" in b), namespace)
+        scores = namespace["scores"]
+        assert scores.shape == (2, 16) and bool(torch.isfinite(scores).all())
+        assert len(set(scores.flatten().tolist())) > 1  # the weights matter
+    finally:
+        CONTROLLERS.pop(namespace.get("ProportionalSpec"), None)
+        CONTROLLER_NAMES.pop("proportional", None)

@@ -8,7 +8,7 @@ import torch
 from evolution import NEAT, NEATConfig, Task, TaskError, TaskFitness, make_controller, rollout
 from evolution.phenotype import SigmoidSpec, SpikingSpec
 from tasks.cartpole import CartPoleTask
-from tasks.experiments.cartpole import controller_config, nonmarkov_fitness
+from tasks.studies.cartpole import controller_config, nonmarkov_fitness
 
 
 class PointMass(Task):
@@ -168,7 +168,7 @@ def test_terminated_tells_a_task_end_from_the_step_limit():
 
 
 def test_markov_cartpole_with_bernoulli_inputs_is_the_same_on_every_path(monkeypatch):
-    from tasks.experiments.cartpole import markov_config, markov_fitness
+    from tasks.studies.cartpole import markov_config, markov_fitness
 
     cfg = markov_config("snn", pop_size=12)
     neat = NEAT(cfg, seeds=[2])
@@ -221,8 +221,8 @@ class TupleMass(PointMass):
 def test_a_plain_tuple_state_runs_as_its_stacked_twin(kind):
     cfg = _config(kind)
     genomes = _population(cfg)
-    plain = rollout(TupleMass(), make_controller(genomes, cfg, TupleMass(), kind=kind), episodes=3, seed=4)
-    stacked = rollout(PointMass(), make_controller(genomes, cfg, PointMass(), kind=kind), episodes=3, seed=4)
+    plain = rollout(TupleMass(), make_controller(genomes, cfg, TupleMass(), kind), episodes=3, seed=4)
+    stacked = rollout(PointMass(), make_controller(genomes, cfg, PointMass(), kind), episodes=3, seed=4)
     assert torch.equal(plain.returns, stacked.returns) and torch.equal(plain.steps, stacked.steps)
 
 
@@ -230,4 +230,4 @@ def test_nan_in_a_tuple_start_is_caught_at_reset_counting_starts():
     cfg = _config("sigmoid")
     task = TupleMass(bad_start=1)
     with pytest.raises(TaskError, match=r"reset\(\) returned state holding NaN or inf at 1 of 3 start\(s\), first: episode 1"):
-        rollout(task, make_controller(_population(cfg), cfg, task, kind="sigmoid"), episodes=3)
+        rollout(task, make_controller(_population(cfg), cfg, task, "sigmoid"), episodes=3)

@@ -10,8 +10,8 @@ import evolution.weight_search as ws
 from evolution import NEAT, load_genome, make_controller, rollout, save_genome
 from evolution.weight_search import FixedTopologyProblem
 from tasks.cartpole import CartPoleTask, cartpole_failed
-from tasks.experiments.cartpole import controller_config, nonmarkov_fitness
-from tasks.generalization import (
+from tasks.studies.cartpole import controller_config, nonmarkov_fitness
+from tasks.studies.generalization import (
     grid_ranges,
     make_policy,
     policy_success_rate,
@@ -83,7 +83,7 @@ def test_batched_evaluation_equals_each_solution_alone(controller, cfg, monkeypa
         g = problem.to_genomes(batch.values[k])
         per_start = []
         for s in range(3):
-            alone = make_controller(g, cfg, TASK, kind=controller)
+            alone = make_controller(g, cfg, TASK, controller)
             result = rollout(TASK, alone, episodes=1, starts=starts[s : s + 1], max_steps=300)
             per_start.append(result.steps.item())
         assert batched[k].item() == sum(per_start) / 3
@@ -182,11 +182,12 @@ def test_start_grid_has_625_distinct_states_inside_the_limits():
 
 
 class _ConstantPush:
-    """A controller (``evolution.rollout``'s protocol) of ``num_genomes`` genomes that always pushes +10 N."""
+    """A controller (``evolution.task.Controller``) of ``num_genomes`` genomes that always pushes +10 N."""
+
+    dtype, device = torch.float32, torch.device("cpu")
 
     def __init__(self, num_genomes):
         self.num_genomes = num_genomes
-        self.weight = torch.zeros(num_genomes, 1, 1)  # the rollout's dtype and device
 
     def initial_state(self, network):
         return network

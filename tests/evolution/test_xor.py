@@ -12,8 +12,7 @@ import statistics
 
 import torch
 
-from tasks.experiments.xor import run_xor
-from tasks.xor import XOR_CONFIG, xor_outputs
+from tasks.studies.xor import XOR_CONFIG, run_xor, xor_outputs
 
 
 def test_sigmoid_neat_solves_xor_on_a_seeded_sample():
@@ -27,7 +26,7 @@ def test_sigmoid_neat_solves_xor_on_a_seeded_sample():
 
 def test_solution_genomes_really_solve_xor():
     from evolution.neat import NEAT
-    from tasks.xor import xor_fitness, xor_solved
+    from tasks.studies.xor import xor_fitness, xor_solved
 
     neat = NEAT(XOR_CONFIG, seeds=[3, 4])
     result = neat.run(xor_fitness, 100, solved_fn=lambda g, f: xor_solved(g))

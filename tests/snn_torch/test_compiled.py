@@ -5,9 +5,9 @@ import warnings
 import pytest
 import torch
 
-import snn_torch.compiled as compiled_mod
-from snn_torch.compiled import CompiledSubstep
+import snn_torch.kernels.compiled as compiled_mod
 from snn_torch.functional import QIU2019, IzhikevichParams, recurrent_init, recurrent_izhikevich_step
+from snn_torch.kernels.compiled import CompiledSubstep
 
 
 def _network(B, N, seed):

@@ -4,7 +4,7 @@ import warnings
 
 import pytest
 
-from snn_torch import _cbuild
+from snn_torch.kernels import build as _cbuild
 
 NAMES = ("SNN_NEAT_C_KERNELS", "SNN_NEAT_FUSED")
 

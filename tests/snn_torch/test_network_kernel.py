@@ -8,12 +8,12 @@ import torch
 
 from snn_torch import PopulationRecurrentIzhikevich
 from snn_torch.functional.izhikevich import QIU2019, REGULAR_SPIKING
-from snn_torch.functional.network_kernel import kernel_available, network_steps_kernel
 from snn_torch.functional.recurrent import (
     ordered_synaptic_current,
     recurrent_init,
     recurrent_izhikevich_steps,
 )
+from snn_torch.kernels.network import kernel_available, network_steps_kernel
 
 needs_cc = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None,
                               reason="no C compiler on this machine: the torch step is used instead")
@@ -172,7 +172,7 @@ def test_sigmoid_twin_refuses_bad_network_indices_and_matches_a_row_alone():
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 @pytest.mark.parametrize("N, clamped, bias", [(5, 2, 1), (9, 4, 0), (40, 3, 2)])
 def test_sigmoid_kernel_equals_the_torch_updates_bit_for_bit(dtype, N, clamped, bias):
-    from snn_torch.functional.sigmoid_kernel import sigmoid_kernel_supports
+    from snn_torch.kernels.sigmoid import sigmoid_kernel_supports
     from snn_torch.modules.recurrent import PopulationRecurrentSigmoid
 
     g = torch.Generator().manual_seed(N)
@@ -197,8 +197,9 @@ def test_sigmoid_kernel_equals_the_torch_updates_bit_for_bit(dtype, N, clamped, 
 @pytest.mark.parametrize("stem", ["recurrent_izhikevich", "recurrent_sigmoid", "episodes"])
 def test_kernel_libraries_export_exactly_what_their_headers_declare(stem):
     from evolution import episodes
-    from snn_torch._cbuild import parse_prototypes
-    from snn_torch.functional import network_kernel, sigmoid_kernel
+    from snn_torch.kernels import network as network_kernel
+    from snn_torch.kernels import sigmoid as sigmoid_kernel
+    from snn_torch.kernels.build import parse_prototypes
 
     loader, csrc = {"recurrent_izhikevich": (network_kernel._library, network_kernel._CSRC),
                     "recurrent_sigmoid": (sigmoid_kernel._library, sigmoid_kernel._CSRC),

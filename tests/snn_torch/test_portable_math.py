@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from snn_torch._cbuild import load_library
 from snn_torch.functional import portable_math as pm
+from snn_torch.kernels.build import load_library
 
 _PROBE = Path(__file__).resolve().parent.parent / "csrc"
 

@@ -21,14 +21,15 @@ import torch
 
 pytest.importorskip("ray")
 
-from tasks.experiments.distributed import (  # noqa: E402
+from tasks.studies.distributed import (  # noqa: E402
     has_shards,
     merge_runs,
     run_controller_on_ray,
     run_controller_sharded,
     shard_seeds,
 )
-from tasks.experiments.reproduce import ControllerRuns, ReproduceError, run_controller  # noqa: E402
+from tasks.studies.reproduce import ReproduceError, run_controller  # noqa: E402
+from tasks.studies.results import ControllerRuns  # noqa: E402
 
 RAY = str(Path(sys.executable).parent / "ray")
 TASK, CONTROLLER, SEEDS, GENERATIONS = "table2", "sigmoid", [0, 1, 2, 3], 6
@@ -203,7 +204,7 @@ def test_bad_address_is_a_clear_error(tmp_path):
     with pytest.raises(ReproduceError, match="--ray 'no-port'"):
         run_controller_on_ray(TASK, CONTROLLER, SEEDS, GENERATIONS, tmp_path, address="no-port")
 
-    from tasks.cli import main
+    from tasks.studies.cli import main
 
     with pytest.raises(SystemExit, match=f"snn-neat reproduce: error: --ray '{address}'"):
         main(["reproduce", "table2", "--runs", "2", "--controllers", "sigmoid", "--out", str(tmp_path / "cli"),
@@ -216,7 +217,7 @@ def test_cluster_lost_mid_run_then_local_resume(long_reference, tmp_path):
     out = tmp_path / "out"
     doomed = Cluster(tmp_path / "ray_start.log")
     try:
-        cmd = [sys.executable, "-m", "tasks.cli", "reproduce", TASK, "--runs", str(len(SEEDS)), "--generations",
+        cmd = [sys.executable, "-m", "tasks.studies.cli", "reproduce", TASK, "--runs", str(len(SEEDS)), "--generations",
                str(LONG), "--controllers", CONTROLLER, "--out", str(out), "--ray", doomed.address,
                "--shards", "4", "--no-generalization", "--quiet"]
         with open(tmp_path / "driver.log", "w") as log:
@@ -248,7 +249,7 @@ def test_cluster_lost_mid_run_then_local_resume(long_reference, tmp_path):
     for k in done:  # a finished shard's results stay on disk
         assert (out / "shards" / f"{CONTROLLER}-{k}" / f"{CONTROLLER}.ckpt").exists()
 
-    from tasks.cli import main
+    from tasks.studies.cli import main
 
     main(["reproduce", TASK, "--runs", str(len(SEEDS)), "--generations", str(LONG), "--controllers",
           CONTROLLER, "--out", str(out), "--resume", "--no-generalization", "--quiet"])

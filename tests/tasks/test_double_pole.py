@@ -129,7 +129,7 @@ def test_the_native_step_is_the_torch_step_bit_for_bit(velocities):
     all 625 generalisation starts under the LQR law with noise (a few start states fail, most
     balance 600 steps): the same bits (sin and cos from portable_math, sums in slot order)."""
     from evolution.native_plant import native_plant
-    from tasks.double_pole import generalization_starts
+    from tasks.studies.generalization import generalization_starts
 
     task = DoublePoleTask(velocities=velocities, fitness="steps" if velocities else "damping", max_steps=600)
     plant = native_plant(task, torch.float64)
@@ -184,7 +184,8 @@ def test_dpnv_evolves_through_the_public_seam():
 
 
 def test_generalization_grid_and_the_champion_test():
-    from tasks.double_pole import GRUAU_RANGES, balanced_steps, champion_solves, generalization_starts
+    from tasks.studies.double_pole import champion_solves
+    from tasks.studies.generalization import GRUAU_RANGES, balanced_steps, generalization_starts
 
     grid = generalization_starts()
     assert grid.shape == (625, 6) and bool((grid[:, 4:] == 0).all())
@@ -208,7 +209,7 @@ def test_generalization_grid_and_the_champion_test():
 
 def test_observation_bounds_set_the_scaling_and_the_champion_test_uses_them():
     from evolution.phenotype import SigmoidSpec
-    from tasks.double_pole import balanced_steps
+    from tasks.studies.generalization import balanced_steps
 
     narrow = DoublePoleTask.with_velocities(observation_bounds=(2.4, 2.0, 0.3, 2.0, 0.3, 4.0), max_steps=300)
     assert narrow.observation_high == (2.4, 2.0, 0.3, 2.0, 0.3, 4.0) and narrow.observation_low[2] == -0.3
@@ -217,8 +218,8 @@ def test_observation_bounds_set_the_scaling_and_the_champion_test_uses_them():
             DoublePoleTask.with_velocities(observation_bounds=bad)
     cfg = spiking_config(6, pop_size=12, num_bias=1, sigma_mutate_rate=0.0, compatibility_sigma_coefficient=0.0)
     genomes = NEAT(cfg, seeds=[3]).ask()
-    fit = TaskFitness(narrow, cfg, "sigmoid", SigmoidSpec())(genomes)
-    steps = balanced_steps(genomes, cfg, "sigmoid", SigmoidSpec(), velocities=True, max_steps=300, task=narrow)
-    default = balanced_steps(genomes, cfg, "sigmoid", SigmoidSpec(), velocities=True, max_steps=300)
+    fit = TaskFitness(narrow, cfg, SigmoidSpec())(genomes)
+    steps = balanced_steps(genomes, cfg, SigmoidSpec(), velocities=True, max_steps=300, task=narrow)
+    default = balanced_steps(genomes, cfg, SigmoidSpec(), velocities=True, max_steps=300)
     assert torch.equal(steps[..., 0].to(fit.dtype), fit)  # the test sees what evolution saw
     assert not torch.equal(steps, default)  # and the bounds change what the networks do

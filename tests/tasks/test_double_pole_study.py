@@ -8,8 +8,8 @@ import torch
 
 from evolution import NEAT
 from evolution.checkpoint import load_checkpoint_dict
-from tasks.double_pole import LONG_BALANCE_STEPS
-from tasks.experiments.double_pole import (
+from tasks.studies.double_pole import (
+    LONG_BALANCE_STEPS,
     OBSERVATION_BOUNDS,
     POPULATION,
     PUBLISHED,
@@ -19,8 +19,8 @@ from tasks.experiments.double_pole import (
     study_spec,
     study_task,
 )
-from tasks.experiments.double_pole_report import study_rows, write_study_report
-from tasks.experiments.reproduce import ReproduceError, run_controller
+from tasks.studies.double_pole_report import study_rows, write_study_report
+from tasks.studies.reproduce import ReproduceError, run_controller
 
 
 def test_the_variants_are_neat_2002s_setups():
@@ -112,7 +112,7 @@ def test_reproduce_with_the_signed_coding_records_it_and_resumes_only_with_it(tm
 
 def test_evaluations_are_also_counted_as_neat_121_counts_them(tmp_path):
     """population x (generation - 1) + the first solving genome's 1-based position in its generation."""
-    from tasks.experiments.double_pole_report import neat121_evaluations
+    from tasks.studies.double_pole_report import neat121_evaluations
 
     cfg = study_config("dpv", "sigmoid", pop_size=10, fitness_threshold=50.0)
     neat = NEAT(cfg, seeds=[0, 1, 2])
@@ -141,7 +141,7 @@ def test_evaluations_are_also_counted_as_neat_121_counts_them(tmp_path):
 def test_neat_121s_test_takes_the_best_species_not_tested_since_it_improved():
     """One champion per run and generation: the best species' first, then, while it does not
     improve, the next species' champion; a species that improves is tested again."""
-    from tasks.experiments.double_pole import SpeciesChampionTest
+    from tasks.studies.double_pole import SpeciesChampionTest
 
     cfg = study_config("dpnv", "sigmoid", pop_size=6)
     neat = NEAT(cfg, seeds=[0, 1])

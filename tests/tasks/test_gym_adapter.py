@@ -37,7 +37,7 @@ def test_continuous_actions_scale_to_the_box_and_sigmoid_controllers_run_too():
     task = GymTask("Pendulum-v1", max_steps=30)
     assert (task.discrete, task.action_size, task.action_max) == (0, 1, 2.0)
     cfg = NEATConfig(num_inputs=3, num_outputs=1, num_bias=1, pop_size=5)
-    result = rollout(task, make_controller(NEAT(cfg, seeds=[0]).ask(), cfg, task, kind="sigmoid"), episodes=2,
+    result = rollout(task, make_controller(NEAT(cfg, seeds=[0]).ask(), cfg, task, "sigmoid"), episodes=2,
                      seed=3, record=True)
     assert result.returns.shape == (5, 2) and bool((result.returns < 0).all())  # Pendulum's reward is a cost
     assert bool((result.steps == 30).all()) and float(result.trace["action"].abs().max()) <= 2.0

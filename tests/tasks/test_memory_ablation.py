@@ -7,7 +7,7 @@ import torch
 from evolution.neat import NEAT
 from evolution.phenotype import SpikingController
 from experiments.memory_ablation import StaticMapController, WipedStateController, ablation_steps
-from tasks.experiments.cartpole import controller_config, nonmarkov_fitness
+from tasks.studies.cartpole import controller_config, nonmarkov_fitness
 
 
 def _genomes():

@@ -12,24 +12,19 @@ from matplotlib.patches import FancyArrowPatch
 from PIL import Image
 
 from evolution import NEAT, make_controller, rollout
-from evolution.population import initial_genomes
-from evolution.rng import RunRNG
-from snn_torch.plots import save_figure
-from tasks.cartpole import CartPoleTask
-from tasks.experiments.cartpole import controller_config
-from tasks.plots import (
+from evolution.plots import (
     EvolutionHistory,
-    animate_cartpole,
     plot_best_fitness_mean_std,
-    plot_episode,
-    plot_raster,
     plot_search_progress,
     plot_species_sizes,
-    plot_success_rates,
     plot_topology,
-    plot_training_curve,
-    plot_trajectory,
 )
+from evolution.population import initial_genomes
+from evolution.rng import RunRNG
+from snn_torch.plots import plot_raster, plot_training_curve, save_figure
+from tasks.cartpole import CartPoleTask
+from tasks.studies.cartpole import controller_config
+from tasks.studies.plots import animate_cartpole, plot_episode, plot_success_rates, plot_trajectory
 
 
 def _non_blank(path):

@@ -13,14 +13,9 @@ import pytest
 import torch
 
 from evolution.checkpoint import load_checkpoint_dict
-from tasks.cli import main
-from tasks.experiments.reproduce import (
-    ControllerRuns,
-    ReproduceError,
-    mann_whitney,
-    run_controller,
-    write_report,
-)
+from tasks.studies.cli import main
+from tasks.studies.reproduce import ReproduceError, run_controller, write_report
+from tasks.studies.results import ControllerRuns, mann_whitney
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -97,9 +92,9 @@ def test_sigkill_midway_then_resume_gives_the_same_table(tmp_path):
             "--no-generalization"]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     ref, cut = tmp_path / "ref", tmp_path / "cut"
-    subprocess.run([sys.executable, "-m", "tasks.cli", *args, "--out", str(ref)], check=True, env=env,
+    subprocess.run([sys.executable, "-m", "tasks.studies.cli", *args, "--out", str(ref)], check=True, env=env,
                    capture_output=True, timeout=600)
-    proc = subprocess.Popen([sys.executable, "-m", "tasks.cli", *args, "--out", str(cut)], env=env,
+    proc = subprocess.Popen([sys.executable, "-m", "tasks.studies.cli", *args, "--out", str(cut)], env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     ckpt = cut / "snn.ckpt"
     deadline = time.time() + 300
@@ -111,7 +106,7 @@ def test_sigkill_midway_then_resume_gives_the_same_table(tmp_path):
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     assert not (cut / "table2.md").exists()
-    subprocess.run([sys.executable, "-m", "tasks.cli", *args, "--out", str(cut), "--resume"], check=True, env=env,
+    subprocess.run([sys.executable, "-m", "tasks.studies.cli", *args, "--out", str(cut), "--resume"], check=True, env=env,
                    capture_output=True, timeout=600)
     assert _rows(cut / "runs.csv") == _rows(ref / "runs.csv")
     strip = lambda rows: [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]  # noqa: E731
@@ -145,29 +140,27 @@ def test_sensitivity_sweep_rows_and_cli(capsys):
 
 def test_ga_choice_reaches_the_config_and_guards_resume(tmp_path):
     from experiments.sensitivity import parse_value
-    from tasks.experiments.cartpole import GA_CHOICES, TUNED_GA, ga_choice
+    from tasks.studies.registry import GA_CHOICES, STUDIES
 
     python_like = run_controller("table1", "sigmoid", [0, 1], 1, tmp_path / "np", ga="neat-python", progress=False)
     cfg = python_like.config
     assert cfg.weight_mutate_per_gene and cfg.elitism == 2 and cfg.weight_mutate_power == 0.5
     assert python_like.row()["ga"] == "neat-python"
     tuned = run_controller("table1", "sigmoid", [0, 1], 1, tmp_path / "tuned", progress=False)
-    preset, extra = TUNED_GA[("table1", "sigmoid")]
+    preset, extra = STUDIES["table1"].tuned_ga["sigmoid"]
     for key, value in extra.items():
         assert getattr(tuned.config, key) == value
     assert tuned.row()["ga"].startswith(preset)
-    assert ga_choice("table2", "snn", "neat-c++") == ("neat-c++", {})
+    assert STUDIES["table2"].ga_choice("snn", "neat-c++") == ("neat-c++", {})
     with pytest.raises(ReproduceError, match="cannot resume .* ga="):
         run_controller("table1", "sigmoid", [0, 1], 1, tmp_path / "np", resume=True, ga="neat-c++", progress=False)
     with pytest.raises(ReproduceError, match="ga must be one of"):
         run_controller("table1", "sigmoid", [0], 1, tmp_path / "bad", ga="neat-java", progress=False)
-    from tasks.cli import GA_CHOICES as CLI_GA_CHOICES
+    from tasks.studies.cli import build_parser
 
-    assert CLI_GA_CHOICES == GA_CHOICES
-    from tasks.cli import TASKS as CLI_TASKS
-    from tasks.experiments.reproduce import TASKS
-
-    assert CLI_TASKS == TASKS
+    reproduce = build_parser()._subparsers._group_actions[0].choices["reproduce"]
+    choices = {a.dest: a.choices for a in reproduce._actions if a.choices}
+    assert list(choices["table"]) == list(STUDIES) and list(choices["ga"]) == list(GA_CHOICES)  # from the registry
     assert parse_value("2", "elitism") == 2 and parse_value("1", "weight_mutate_power") == 1.0
     assert parse_value("true", "weight_mutate_per_gene") is True
     with pytest.raises(ValueError, match="NEATConfig.elitism"):
@@ -196,7 +189,7 @@ def test_results_do_not_depend_on_a_c_compiler(tmp_path):
                       ("no compiler", {"CC": str(tmp_path / "no-such-cc"), "PATH": "/nonexistent",
                                        "SNN_NEAT_CACHE": str(tmp_path / "empty-cache")})):
         out = tmp_path / name.replace(" ", "_")
-        proc = subprocess.run([sys.executable, "-m", "tasks.cli", "reproduce", "table2", "--runs", "2",
+        proc = subprocess.run([sys.executable, "-m", "tasks.studies.cli", "reproduce", "table2", "--runs", "2",
                                "--generations", "3", "--seed", "100", "--out", str(out), "--quiet", "--threads", "1"],
                               cwd=ROOT, env={**os.environ, **env}, capture_output=True, text=True, timeout=600)
         assert proc.returncode == 0, proc.stderr
@@ -209,8 +202,8 @@ def test_results_do_not_depend_on_a_c_compiler(tmp_path):
 def test_the_tables_signed_coding_is_a_sensitivity_study_of_the_same_runs(tmp_path):
     """`--coding signed` on the paper's tables: the paper's specs with signed inputs (push-pull
     pairs for Table I's Bernoulli encoder, so twice the input nodes), recorded in the report."""
-    from tasks.experiments.cartpole import markov_config, paper_spec
-    from tasks.experiments.reproduce import study_config
+    from tasks.studies.cartpole import markov_config, paper_spec
+    from tasks.studies.reproduce import study_config
 
     assert paper_spec("table2", "snn", "signed").input_coding == "signed"
     assert paper_spec("table1", "snn", "signed").input_coding == "push_pull"
@@ -222,7 +215,7 @@ def test_the_tables_signed_coding_is_a_sensitivity_study_of_the_same_runs(tmp_pa
     paper = run_controller("table2", "sigmoid", [0, 1], 3, tmp_path / "paper", progress=False)
     assert signed.extra["coding"] == "signed" and not torch.equal(signed.history, paper.history)
     write_report({"sigmoid": signed}, "table2", tmp_path / "signed", command="test", generalization=True)
-    from tasks.generalization import success_rate
+    from tasks.studies.generalization import success_rate
 
     expected = success_rate(signed.champions, signed.config, controller="sigmoid",
                             spec=paper_spec("table2", "sigmoid", "signed"))[:, 0].tolist()

@@ -6,9 +6,9 @@ import stat
 import pytest
 import torch
 
-import tasks.experiments.reproduce as rep
+import tasks.studies.results as results
 from evolution.checkpoint import CheckpointError, atomic_torch_save, load_checkpoint_dict
-from tasks.experiments.reproduce import FIG8_MAX_PAD, run_controller, write_report
+from tasks.studies.reproduce import FIG8_MAX_PAD, run_controller, write_report
 
 
 def test_a_huge_budget_pads_fig8_to_a_bound_and_an_interrupted_report_does_not_look_complete(tmp_path, monkeypatch):
@@ -39,7 +39,7 @@ def test_a_huge_budget_pads_fig8_to_a_bound_and_an_interrupted_report_does_not_l
     def full_disk(fig, path):
         raise OSError(28, "No space left on device", str(path))
 
-    monkeypatch.setattr(rep, "_save_png", full_disk)
+    monkeypatch.setattr(results, "save_png", full_disk)
     with pytest.raises(OSError):
         write_report({"sigmoid": r}, "table2", tmp_path, command="test", generalization=False)
     assert not (tmp_path / "table2.md").exists() and not (tmp_path / "summary.json").exists()

@@ -2,7 +2,7 @@
 
 ``recurrent_izhikevich_steps`` costs ~50 small tensor ops per substep, and for the small
 networks NEAT evolves (N ~ 8) per-op overhead, not arithmetic, sets its speed. The kernel
-(``snn_torch/csrc/recurrent_izhikevich.c``) runs all the substeps of a control step in C, 8
+(``snn_torch/kernels/csrc/recurrent_izhikevich.c``) runs all the substeps of a control step in C, 8
 networks side by side per thread, at a compile-time constant size for the usual sizes; one
 call per control step. It is generic: any number of nodes up to ``MAX_NODES``, any inputs
 (constant currents, and spike-source nodes for rate-coded inputs), rows mapped to networks by
@@ -26,16 +26,16 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
-from snn_torch._cbuild import library_loader
 from snn_torch.functional.counter_rng import BernoulliSources
 from snn_torch.functional.izhikevich import IzhikevichParams
 from snn_torch.functional.recurrent import RecurrentState
+from snn_torch.kernels.build import library_loader
 
 __all__ = ["MAX_NODES", "kernel_available", "kernel_supports", "network_steps_kernel", "check_network_index",
            "RateControlKernel"]
 
 MAX_NODES = 64  # lane buffers live on the stack
-_CSRC = Path(__file__).resolve().parent.parent / "csrc"
+_CSRC = Path(__file__).resolve().parent / "csrc"
 
 
 # What the fallback costs (benchmarks/seam_speed.py --torch-path, this 2-core CPU, one thread).

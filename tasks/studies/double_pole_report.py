@@ -1,22 +1,26 @@
 """The double-pole study's report: evaluations to solve beside the published figures, the
 625-start generalisation test, champion sizes and the memory ablation, with plots.
 
-Written by ``snn-neat reproduce dpv|dpnv`` (``tasks.experiments.reproduce.write_report``).
+Written by ``snn-neat reproduce dpv|dpnv`` (``tasks.studies.registry.STUDIES[...].write_report``).
 """
 
 from __future__ import annotations
 
-import csv
-import io
-import json
 import math
 import os
 import statistics
 from pathlib import Path
 
-from tasks.double_pole import GENERALIZATION_STEPS, generalization_starts
-from tasks.experiments.double_pole import NEAT121_SCALES, PUBLISHED, study_spec, study_task
-from tasks.experiments.reproduce import LABELS, ControllerRuns, mann_whitney
+from tasks.studies.double_pole import NEAT121_SCALES, PUBLISHED, study_spec, study_task
+from tasks.studies.generalization import GENERALIZATION_STEPS, generalization_starts
+from tasks.studies.results import (
+    LABELS,
+    ControllerRuns,
+    ReportWriter,
+    example_label,
+    example_run,
+    mann_whitney,
+)
 
 __all__ = ["study_rows", "write_study_report", "STATIC_MAP_STEPS", "neat121_evaluations"]
 
@@ -27,7 +31,7 @@ STATIC_MAP_STEPS = 20  # control steps (400 ms) a fresh network settles on each 
 def _champion_tests(r: ControllerRuns, variant: str, generalization: bool) -> dict[str, list[float]]:
     """Per run: starts of the 625 its champion balances for 1000 steps, and steps balanced from the
     standard start (up to 1000), each as evolved and as a static map."""
-    from tasks.double_pole import balanced_steps
+    from tasks.studies.generalization import balanced_steps
 
     coding = r.extra.get("coding", "study")
     task, spec = study_task(variant, coding), study_spec(variant, r.controller, coding)
@@ -36,11 +40,11 @@ def _champion_tests(r: ControllerRuns, variant: str, generalization: bool) -> di
         return out
     starts = generalization_starts()
     for name, settle in (("generalization", None), ("generalization_static_map", STATIC_MAP_STEPS)):
-        steps = balanced_steps(r.champions, r.config, r.controller, spec, starts=starts, task=task,
+        steps = balanced_steps(r.champions, r.config, spec, starts=starts, task=task,
                                static_map_steps=settle)
         out[name] = (steps[:, 0] >= GENERALIZATION_STEPS).sum(-1).tolist()
     for name, settle in (("standard_start", None), ("standard_start_static_map", STATIC_MAP_STEPS)):
-        steps = balanced_steps(r.champions, r.config, r.controller, spec, task=task, static_map_steps=settle)
+        steps = balanced_steps(r.champions, r.config, spec, task=task, static_map_steps=settle)
         out[name] = steps[:, 0, 0].tolist()
     return out
 
@@ -217,12 +221,12 @@ def _plot_episode(r: ControllerRuns, variant: str, run: int, label: str):
     """Run ``run``'s champion from the standard start for up to 1000 steps, recorded."""
     from evolution.phenotype import make_controller
     from evolution.rollout import rollout
-    from tasks.plots import plot_trajectory
+    from tasks.studies.plots import plot_trajectory
 
     coding = r.extra.get("coding", "study")
     task = study_task(variant, coding).with_fitness("steps", EPISODE_PLOT_STEPS)
     one = r.champions.select_runs([run])
-    controller = make_controller(one, r.config, task, study_spec(variant, r.controller, coding), kind=r.controller)
+    controller = make_controller(one, r.config, task, study_spec(variant, r.controller, coding))
     trace = rollout(task, controller, record=True).trace
     state, force = trace["state"][:, 0], trace["action"][:, 0, 0]
     return plot_trajectory(state[:, 0], {"θ1 (long pole)": state[:, 2], "θ2 (short pole)": state[:, 4]}, force,
@@ -232,51 +236,32 @@ def _plot_episode(r: ControllerRuns, variant: str, run: int, label: str):
 def write_study_report(results: dict[str, ControllerRuns], variant: str, out: str | os.PathLike, *, command: str,
                        generalization: bool = True) -> list[Path]:
     """Write VARIANT.md, runs.csv, summary.json, the fitness, evaluations and generalisation plots,
-    a champion's topology and episode per controller and every champion genome. ``summary.json`` and then
-    ``VARIANT.md`` are written last (removed first): a report with ``VARIANT.md`` is complete."""
-    from evolution.checkpoint import atomic_write_bytes
-    from evolution.genome_io import save_genome
-    from tasks.experiments.reproduce import _example_run, _save_png
-    from tasks.plots import plot_best_fitness_mean_std, plot_topology
+    a champion's topology and episode per controller and every champion genome (``ReportWriter``: a
+    report with ``VARIANT.md`` is complete)."""
+    from evolution.plots import plot_best_fitness_mean_std, plot_topology
 
-    out = Path(out)
-    for last in (out / f"{variant}.md", out / "summary.json"):
-        last.unlink(missing_ok=True)
+    report = ReportWriter(out, variant)
     summary = study_rows(results, variant, generalization=generalization)
     summary["seeds"] = next(iter(results.values())).seeds
     summary["command"] = command
-    written: list[Path] = []
-
-    buf = io.StringIO()
-    w = csv.writer(buf)
     keys = ["seed", "solved_generation", "evaluations", "evaluations_neat121", "best_fitness", "hidden_nodes",
             "enabled_connections",
             "generalization", "generalization_static_map", "standard_start", "standard_start_static_map"]
-    w.writerow(["controller", "run", *keys])
-    for c, runs in summary["runs"].items():
-        for i in range(len(runs["seed"])):
-            w.writerow([c, i, *(runs[k][i] if k in runs else "" for k in keys)])
-    written.append(atomic_write_bytes(out / "runs.csv", buf.getvalue().encode()))
-
-    fig = plot_best_fitness_mean_std({LABELS.get(c, c): r.history.T for c, r in results.items()},
-                                     title=f"{variant.upper()}: best fitness per generation over "
-                                           f"{len(summary['seeds'])} runs")
-    written.append(_save_png(fig, out / "best_fitness.png"))
-    written.append(_save_png(_plot_evaluations(summary), out / "evaluations_to_solve.png"))
+    report.rows("runs.csv", ["controller", "run", *keys],
+                ([c, i, *(runs[k][i] if k in runs else "" for k in keys)]
+                 for c, runs in summary["runs"].items() for i in range(len(runs["seed"]))))
+    report.png(plot_best_fitness_mean_std({LABELS.get(c, c): r.history.T for c, r in results.items()},
+                                          title=f"{variant.upper()}: best fitness per generation over "
+                                                f"{len(summary['seeds'])} runs"), "best_fitness.png")
+    report.png(_plot_evaluations(summary), "evaluations_to_solve.png")
     if generalization:
-        written.append(_save_png(_plot_generalization(summary), out / "generalization.png"))
+        report.png(_plot_generalization(summary), "generalization.png")
     names = {i: n for i, n in enumerate(("x", "ẋ", "θ1", "θ̇1", "θ2", "θ̇2") if variant == "dpv" else ("x", "θ1", "θ2"))}
     for c, r in results.items():
-        run = _example_run(r)
-        label = f"{LABELS.get(c, c)}, seed {r.seeds[run]}" + (
-            f", solved at generation {r.solved_generation[run]}" if r.solved_generation[run] > 0 else ", not solved")
-        written.append(_save_png(plot_topology(r.champions, r.config, run, 0, labels={**names, r.config.first_output: "F"},
-                                               title=f"Champion topology: {label}"), out / f"topology_{c}.png"))
-        written.append(_save_png(_plot_episode(r, variant, run, label), out / f"trajectory_{c}.png"))
-        for i, seed in enumerate(r.seeds):
-            written.append(save_genome(out / "champions" / f"{c}_seed{seed}.json", r.champions.select_runs([i]),
-                                       r.config, fitness=r.best_fitness[i]))
-    written.append(atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2, default=float).encode()))
-    written.append(atomic_write_bytes(out / f"{variant}.md", format_study_markdown(summary, command).encode()))
-    return written
-
+        run = example_run(r)
+        label = example_label(r, run)
+        report.png(plot_topology(r.champions, r.config, run, 0, labels={**names, r.config.first_output: "F"},
+                                 title=f"Champion topology: {label}"), f"topology_{c}.png")
+        report.png(_plot_episode(r, variant, run, label), f"trajectory_{c}.png")
+    report.champions(results)
+    return report.finish(summary, format_study_markdown(summary, command))

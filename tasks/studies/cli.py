@@ -16,11 +16,12 @@ from pathlib import Path
 # its OpenMP runtime (nothing above imports torch); a value the user set is kept.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-# tasks.experiments.cartpole.GA_CHOICES, spelled out so that --help needs no torch (a test
-# keeps the two equal).
-GA_CHOICES = ("tuned", "neat-c++", "neat-python")
-# tasks.experiments.reproduce.TASKS, likewise.
-TASKS = ("table1", "table2", "dpv", "dpnv")
+# The studies, their GA presets, codings and champion tests: the registry imports no torch, so
+# --help needs none.
+from tasks.studies.registry import GA_CHOICES, STUDIES  # noqa: E402
+
+CODINGS = tuple(dict.fromkeys(c for s in STUDIES.values() for c in s.codings))
+CHAMPION_TESTS = tuple(dict.fromkeys(t for s in STUDIES.values() for t in s.champion_tests))
 
 
 def _positive_float(text: str) -> float:
@@ -167,15 +168,13 @@ def _check_memory(runs: int, configs: list) -> None:
 def _configs(args: argparse.Namespace) -> list:
     """The NEAT configs a command will evolve (for the memory check)."""
     if args.command == "xor":
-        from tasks.xor import XOR_CONFIG
+        from tasks.studies.xor import XOR_CONFIG
 
         return [XOR_CONFIG]
-    from tasks.experiments.reproduce import study_config
-
     table = args.table if args.command == "reproduce" else ("table1" if args.task == "markov" else "table2")
     controllers = args.controllers if args.command == "reproduce" else [args.controller]
     coding = getattr(args, "coding", "study")
-    return [study_config(table, c, self_loops=args.self_loops, ga=args.ga, coding=coding) for c in controllers]
+    return [STUDIES[table].config(c, self_loops=args.self_loops, ga=args.ga, coding=coding) for c in controllers]
 
 
 def _prepare(args: argparse.Namespace) -> list[int]:
@@ -190,8 +189,8 @@ def _prepare(args: argparse.Namespace) -> list[int]:
 
 def _cmd_xor(args: argparse.Namespace) -> int:
     seeds = _prepare(args)
-    from tasks.experiments.xor import run_xor, write_xor_report
-    from tasks.lock import OutputLock
+    from tasks.studies.lock import OutputLock
+    from tasks.studies.xor import run_xor, write_xor_report
 
     with OutputLock(args.out, _command_line(args)):
         _clean(args.out)
@@ -208,8 +207,8 @@ def _cmd_xor(args: argparse.Namespace) -> int:
 
 def _cmd_evolve(args: argparse.Namespace) -> int:
     _prepare(args)
-    from tasks.experiments.evolve import run_evolve, write_evolve_report
-    from tasks.lock import OutputLock
+    from tasks.studies.evolve import run_evolve, write_evolve_report
+    from tasks.studies.lock import OutputLock
 
     out = args.out
     with OutputLock(out, _command_line(args)):
@@ -235,7 +234,7 @@ def _controllers(text: str) -> list[str]:
 
 def _reproduce_checkpoints(args: argparse.Namespace) -> list[Path]:
     """The checkpoints (or Ray shard manifests) of this reproduction already in ``--out``."""
-    from tasks.experiments.distributed import has_shards
+    from tasks.studies.distributed import has_shards
 
     out = Path(args.out)
     return [out / f"{c}.ckpt" if (out / f"{c}.ckpt").exists() else out / "shards" / f"{c}.json"
@@ -244,9 +243,9 @@ def _reproduce_checkpoints(args: argparse.Namespace) -> list[Path]:
 
 def _cmd_reproduce(args: argparse.Namespace) -> int:
     seeds = _prepare(args)
-    from tasks.experiments.distributed import has_shards, run_controller_sharded, run_controllers_on_ray
-    from tasks.experiments.reproduce import run_controller, write_report
-    from tasks.lock import OutputLock
+    from tasks.studies.distributed import has_shards, run_controller_sharded, run_controllers_on_ray
+    from tasks.studies.lock import OutputLock
+    from tasks.studies.reproduce import run_controller, write_report
 
     command = _command_line(args)
     results = {}
@@ -376,7 +375,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "summary.json, fig8_best_fitness.png, trajectory and topology plots and every champion genome. "
                     "Double pole: VARIANT.md (evaluations to solve beside the published figures, generalisation, "
                     "champion sizes, memory ablation), runs.csv, summary.json, plots and every champion genome.")
-    rep.add_argument("table", choices=list(TASKS), help="which table to reproduce: the paper's table1 or table2, "
+    rep.add_argument("table", choices=list(STUDIES), help="which table to reproduce: the paper's table1 or table2, "
                      "or beyond the paper, double-pole balancing with (dpv) or without (dpnv) velocities")
     rep.add_argument("--runs", type=_positive_int, default=60, help="runs per controller (default: 60, the paper's)")
     rep.add_argument("--seed", type=_non_negative_int, default=0, help="first seed (default: 0)")
@@ -388,12 +387,12 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--ga", choices=GA_CHOICES, default="tuned",
                      help="GA settings: 'tuned' (default), each controller's own pick for the table, made on tuning "
                           "seeds; or one preset for both: neat-c++ (NEAT 2002 / NEAT C++) or neat-python (its defaults)")
-    rep.add_argument("--coding", choices=("study", "signed"), default="study",
+    rep.add_argument("--coding", choices=CODINGS, default=CODINGS[0],
                      help="how observations reach the networks: 'study' (default: the paper's, or the double-pole "
                           "study's: [0, 1] over the bounds) or 'signed' (double pole: NEAT C++ 1.2.1's x/4.8, x_dot/2, "
                           "theta/0.52, theta_dot/2, centred and unclipped; tables: [-1, 1] over the paper's bounds, "
                           "push-pull pairs for Bernoulli inputs; a sensitivity study)")
-    rep.add_argument("--champion-test", choices=("champion", "species"), default="champion",
+    rep.add_argument("--champion-test", choices=CHAMPION_TESTS, default=CHAMPION_TESTS[0],
                      help="dpnv only: the test of a generation: each run's overall champion (default), or NEAT C++ "
                           "1.2.1's champion of the best species not tested since it last improved")
     rep.add_argument("--out", default=None, help="output folder (default: results/TABLE)")
@@ -445,8 +444,8 @@ def _user_error(exc: Exception) -> str | None:
     """The one-line message for an error the user can fix, or None for a bug (its traceback shows)."""
     from evolution.checkpoint import CheckpointError
     from evolution.config import ConfigError
-    from tasks.experiments.reproduce import ReproduceError
-    from tasks.lock import LockError
+    from tasks.studies.lock import LockError
+    from tasks.studies.registry import ReproduceError
 
     if isinstance(exc, (UsageError, ReproduceError, CheckpointError, ConfigError, LockError)):
         return " ".join(str(exc).split("\n"))

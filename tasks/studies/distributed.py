@@ -2,7 +2,7 @@
 
 A run's result does not depend on which other runs share its batch, so the seeds of one
 controller can be split into shards (contiguous slices of the seed list), each shard evolved
-by :func:`~tasks.experiments.reproduce.run_controller` on its own, and the shard results
+by :func:`~tasks.studies.reproduce.run_controller` on its own, and the shard results
 concatenated (:func:`merge_runs`): the merged result equals the one-batch local run.
 
 Layout under ``OUT``::
@@ -15,7 +15,7 @@ Layout under ``OUT``::
 Resume semantics: a shard task always continues from its checkpoint when it exists, so a
 task that Ray retries after its worker died (``max_retries``) picks up from its last
 generation. A finished shard's checkpoint stays on disk. If the cluster goes away mid-run,
-:func:`run_controllers_on_ray` raises :class:`~tasks.experiments.reproduce.ReproduceError`
+:func:`run_controllers_on_ray` raises :class:`~tasks.studies.reproduce.ReproduceError`
 naming the shards that finished; ``--resume`` (on Ray again, or locally: the local path
 :func:`run_controller_sharded` follows the manifest when one exists) completes the rest and
 gives the same results as an uninterrupted run. A resumed reproduction keeps the manifest's
@@ -44,7 +44,9 @@ import torch
 
 from evolution.checkpoint import atomic_write_bytes
 from evolution.population import Genomes
-from tasks.experiments.reproduce import ControllerRuns, ReproduceError, run_controller
+from tasks.studies.registry import ReproduceError
+from tasks.studies.reproduce import run_controller
+from tasks.studies.results import ControllerRuns
 
 __all__ = ["Shard", "has_shards", "merge_runs", "run_controller_on_ray", "run_controller_sharded",
            "run_controllers_on_ray", "shard_layout", "shard_seeds"]

@@ -34,16 +34,11 @@ from evolution.config import NEATConfig
 from evolution.phenotype import SPIKING_SIGMA, SigmoidSpec, SpikingSpec, network_inputs
 from evolution.population import Genomes
 from evolution.rollout import TaskFitness
-from tasks.double_pole import (
-    GENERALIZATION_PASS,
-    LONG_BALANCE_STEPS,
-    DoublePoleTask,
-    champion_solves,
-    champions_pass,
-)
-from tasks.experiments.cartpole import CONTROLLERS, ga_choice, ga_overrides
+from tasks.double_pole import DoublePoleTask
+from tasks.studies.generalization import GENERALIZATION_STEPS, balanced_steps, generalization_starts
+from tasks.studies.registry import CONTROLLERS, STUDIES, ga_overrides
 
-__all__ = ["SpeciesChampionTest", "species_champion_test", "VARIANTS", "CODINGS", "NEAT121_SCALES", "POPULATION", "OBSERVATION_BOUNDS", "PUBLISHED", "study_task", "study_spec", "study_config",
+__all__ = ["LONG_BALANCE_STEPS", "GENERALIZATION_PASS", "champion_solves", "champions_pass", "SpeciesChampionTest", "species_champion_test", "VARIANTS", "CODINGS", "NEAT121_SCALES", "POPULATION", "OBSERVATION_BOUNDS", "PUBLISHED", "study_task", "study_spec", "study_config",
            "study_fitness", "study_solved"]
 
 VARIANTS = ("dpv", "dpnv")
@@ -55,6 +50,8 @@ CODINGS = ("study", "signed")
 NEAT121_SCALES = {"dpv": (4.8, 2.0, 0.52, 2.0, 0.52, 2.0), "dpnv": (4.8, 0.52, 0.52)}  # m, m/s, rad, rad/s
 POPULATION = {"dpv": 150, "dpnv": 1000}  # [NEAT02]
 OBSERVATION_BOUNDS = {"dpv": (2.4, 2.0, 0.3, 2.0, 0.3, 4.0), "dpnv": (2.4, 0.3, 0.3)}  # m, m/s, rad, rad/s
+LONG_BALANCE_STEPS = 100_000  # NEAT 2002: a champion must first balance this long from the standard start
+GENERALIZATION_PASS = 200  # NEAT 2002: of the 625 generalisation starts, a DPNV solution balances this many
 DPNV_EPISODE_STEPS = 1000  # Gruau's damping fitness is measured over 1000 steps
 
 # Published figures, each with its source. ``evaluations``: mean evaluations to solve;
@@ -122,12 +119,12 @@ def study_spec(variant: str, controller: str, coding: str = "study") -> SpikingS
 def study_config(variant: str, controller: str, *, self_loops: bool = False, ga: str = "tuned",
                  coding: str = "study", **overrides) -> NEATConfig:
     """The NEAT config of ``controller`` on ``variant`` under GA preset ``ga`` (default: the
-    study's pick, ``TUNED_GA``): the population of [NEAT02], every input wired to the output at
+    study's pick, ``STUDIES[variant].tuned_ga``): the population of [NEAT02], every input wired to the output at
     the start (plus a bias input for sigmoid NEAT), up to 16 hidden nodes. DPV's threshold is the
     100,000-step balance; DPNV has none (its runs solve by ``study_solved``)."""
     _check(variant, controller, coding)
     if ga == "tuned":
-        ga, extra = ga_choice(variant, controller)
+        ga, extra = STUDIES[variant].ga_choice(controller)
         overrides = {**extra, **overrides}
     task = study_task(variant, coding)
     base = dict(num_inputs=network_inputs(task, study_spec(variant, controller, coding)), num_outputs=1, pop_size=POPULATION[variant], max_hidden=16,
@@ -144,7 +141,37 @@ def study_config(variant: str, controller: str, *, self_loops: bool = False, ga:
 
 def study_fitness(variant: str, controller: str, config: NEATConfig, coding: str = "study") -> TaskFitness:
     """``fitness_fn(genomes) -> [R, P]``: steps balanced (DPV) or the damping fitness (DPNV)."""
-    return TaskFitness(study_task(variant, coding), config, controller, study_spec(variant, controller, coding))
+    return TaskFitness(study_task(variant, coding), config, study_spec(variant, controller, coding))
+
+
+def champion_solves(genomes, fitness: Tensor, config, spec=None, *, velocities: bool = False,
+                    long_steps: int = LONG_BALANCE_STEPS, min_general: int = GENERALIZATION_PASS,
+                    task: DoublePoleTask | None = None) -> Tensor:
+    """NEAT 2002's test of a generation (a ``solved_fn`` for ``NEAT.run``): each run's champion (by
+    ``fitness``) solves when it balances ``long_steps`` steps from the standard start and
+    ``min_general`` or more of the 625 generalisation starts for 1000 steps. ``[R, P]`` bool,
+    true at the solving champions."""
+    best = fitness.argmax(-1, keepdim=True)  # [R, 1]
+    solved = champions_pass(genomes.gather(best), config, spec, velocities=velocities, long_steps=long_steps,
+                            min_general=min_general, task=task)
+    out = torch.zeros(fitness.shape, dtype=torch.bool, device=fitness.device)
+    return out.scatter(1, best, solved.unsqueeze(1))
+
+
+def champions_pass(champions, config, spec=None, *, velocities: bool = False,
+                   long_steps: int = LONG_BALANCE_STEPS, min_general: int = GENERALIZATION_PASS,
+                   task: DoublePoleTask | None = None) -> Tensor:
+    """NEAT 2002's test of one genome per run (``champions`` ``[R, 1]``): ``[R]`` bool, true where it
+    balances ``long_steps`` steps from the standard start and ``min_general`` or more of the 625
+    generalisation starts for 1000 steps (the 625 only for those that passed the first)."""
+    long = balanced_steps(champions, config, spec, velocities=velocities, max_steps=long_steps,
+                          task=task)[:, 0, 0]
+    solved = long >= long_steps
+    if bool(solved.any()):
+        general = (balanced_steps(champions, config, spec, velocities=velocities,
+                                  starts=generalization_starts(), task=task) >= GENERALIZATION_STEPS).sum(-1)[:, 0]
+        solved = solved & (general >= min_general)
+    return solved
 
 
 class SpeciesChampionTest:
@@ -203,7 +230,7 @@ def species_champion_test(variant: str, controller: str, config: NEATConfig, nea
                           coding: str = "study") -> SpeciesChampionTest:
     """NEAT C++ 1.2.1's test of a DPNV generation for ``neat``'s runs (``SpeciesChampionTest``)."""
     task, spec = study_task(variant, coding), study_spec(variant, controller, coding)
-    return SpeciesChampionTest(neat, lambda champions: champions_pass(champions, config, controller, spec,
+    return SpeciesChampionTest(neat, lambda champions: champions_pass(champions, config, spec,
                                                                       min_general=GENERALIZATION_PASS, task=task))
 
 
@@ -221,6 +248,6 @@ def study_solved(variant: str, controller: str, config: NEATConfig,
         return species_champion_test(variant, controller, config, neat, coding)
 
     def solved(genomes: Genomes, fitness: Tensor) -> Tensor:
-        return champion_solves(genomes, fitness, config, controller, spec, min_general=GENERALIZATION_PASS, task=task)
+        return champion_solves(genomes, fitness, config, spec, min_general=GENERALIZATION_PASS, task=task)
 
     return solved

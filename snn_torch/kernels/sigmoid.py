@@ -3,7 +3,7 @@ weighted sum, sigmoid) of many recurrent sigmoid networks, in one call.
 
 ``PopulationRecurrentSigmoid.control_step`` costs a few dozen small tensor ops per update (clamp,
 matvec as a float64 cumsum, slope, the portable sigmoid); for the small networks NEAT evolves
-per-op overhead sets its speed. The kernel (``snn_torch/csrc/recurrent_sigmoid.c``) does the
+per-op overhead sets its speed. The kernel (``snn_torch/kernels/csrc/recurrent_sigmoid.c``) does the
 updates in C, rows mapped to networks by an index; its sigmoid is ``portable_math``'s, the torch
 path's own, so the two agree bit for bit (tested).
 """
@@ -15,12 +15,12 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
-from snn_torch._cbuild import library_loader
+from snn_torch.kernels.build import library_loader
 
 __all__ = ["sigmoid_kernel_supports", "sigmoid_update_kernel", "SIGMOID_MAX_NODES"]
 
 SIGMOID_MAX_NODES = 1024  # per-row buffers live on the stack
-_CSRC = Path(__file__).resolve().parent.parent / "csrc"
+_CSRC = Path(__file__).resolve().parent / "csrc"
 _library = library_loader("recurrent_sigmoid", _CSRC / "recurrent_sigmoid.c", _CSRC / "recurrent_sigmoid.h")
 
 

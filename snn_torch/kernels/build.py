@@ -1,11 +1,11 @@
 """Build the package's C kernels once per machine with the system compiler; load them with ``ctypes``.
 
-Kernels are ``.c``/``.h`` files shipped as package data (``snn_torch/csrc``, ``evolution/csrc``).
+Kernels are ``.c``/``.h`` files shipped as package data (``snn_torch/kernels/csrc``, ``evolution/csrc``).
 Each library's exported functions are declared once, in its header: ``load_library`` reads the
 prototypes there and sets every function's ``ctypes`` signature from them, and the ``.c`` file
 includes the header, so the compiler checks that the definitions match. A header function
 missing from the built library is an error at load. Headers a file includes by
-``#include "name.h"`` are read from its folder (else from ``snn_torch/csrc``, the shared
+``#include "name.h"`` are read from its folder (else from ``snn_torch/kernels/csrc``, the shared
 headers) and are part of the build (and its cache key).
 ``load_libraries`` builds several libraries side by side, one compiler process each.
 
@@ -190,7 +190,7 @@ def _compile(name: str, files: dict[str, str], main: str, cc: str) -> Path | Non
     return build if isinstance(build, Path) else build.finish()
 
 
-def _library_files(source: Path, header: Path | None) -> dict[str, str]:
+def _library_files(source: Path, header: Path | None, include_dirs: Sequence[Path] = ()) -> dict[str, str]:
     """``source``, ``header`` and the local headers they include, transitively (name -> text)."""
     files: dict[str, str] = {}
     pending = [source] if header is None else [source, header]
@@ -199,21 +199,25 @@ def _library_files(source: Path, header: Path | None) -> dict[str, str]:
         if path.name in files:
             continue
         files[path.name] = text = path.read_text()
-        for inc in _LOCAL_INCLUDE.findall(text):  # the file's own folder first, then the shared headers
-            pending.append(path.parent / inc if (path.parent / inc).exists() else SHARED_CSRC / inc)
+        for inc in _LOCAL_INCLUDE.findall(text):  # the file's own folder, then include_dirs, then the shared headers
+            found = [d / inc for d in (path.parent, *include_dirs) if (d / inc).exists()]
+            pending.append(found[0] if found else SHARED_CSRC / inc)
     return files
 
 
-def load_library(name: str, source: Path, header: Path | str) -> KernelLibrary | None:
-    """The kernel library built from ``source`` (which includes ``header``), or None.
+def load_library(name: str, source: Path, header: Path | str, *,
+                 include_dirs: Sequence[Path] = ()) -> KernelLibrary | None:
+    """The kernel library built from ``source`` (which includes ``header``), or None. Headers it
+    includes are read from its folder, then ``include_dirs``, then ``snn_torch/kernels/csrc``.
 
     None: no compiler, the build failed, the cache is unwritable, or kernels are disabled
     (``SNN_NEAT_C_KERNELS=0``); each but the last warns once with the reason.
     """
-    return load_libraries([(name, source, header)])[0]
+    return load_libraries([(name, source, header)], include_dirs=include_dirs)[0]
 
 
-def load_libraries(specs: Sequence[tuple[str, Path, Path | str]]) -> list[KernelLibrary | None]:
+def load_libraries(specs: Sequence[tuple[str, Path, Path | str]], *,
+                   include_dirs: Sequence[Path] = ()) -> list[KernelLibrary | None]:
     """``load_library`` for each ``(name, source, header)``; those not yet built compile side by
     side (one compiler each, so a cold start waits for the slowest, not the sum). ``header`` may
     be the prototypes' text instead of a file (the native plants' generated declarations)."""
@@ -232,7 +236,7 @@ def load_libraries(specs: Sequence[tuple[str, Path, Path | str]]) -> list[Kernel
             if cc is None:
                 continue
             try:
-                files = _library_files(source, header if isinstance(header, Path) else None)
+                files = _library_files(source, header if isinstance(header, Path) else None, include_dirs)
                 prototypes = files[header.name] if isinstance(header, Path) else header
                 started[name] = (_start(name, files, source.name, cc), prototypes)
             except OSError as exc:  # unreadable sources, unwritable cache: fall back and say why

@@ -1,6 +1,6 @@
-/* Entry points for the tests only (see test_entry_points.h): the code they reach is the
+/* Entry points for the tests only (see kernel_entry_points.h): the code they reach is the
    production kernels' own, from the shared headers. */
-#include "test_entry_points.h"
+#include "kernel_entry_points.h"
 
 #include <math.h>
 #include <stdint.h>

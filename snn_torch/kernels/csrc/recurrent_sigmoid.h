@@ -1,5 +1,5 @@
 /* The C kernel of snn_torch.PopulationRecurrentSigmoid: synchronous updates of many recurrent
-   sigmoid networks. Every function here is exported; snn_torch._cbuild reads these prototypes to
+   sigmoid networks. Every function here is exported; snn_torch.kernels.build reads these prototypes to
    declare the ctypes signatures. */
 #include <stdint.h>
 

@@ -1,5 +1,5 @@
 /* The C kernel of snn_torch.PopulationRecurrentIzhikevich: control steps of many recurrent
-   Izhikevich networks. Every function here is exported; snn_torch._cbuild reads these
+   Izhikevich networks. Every function here is exported; snn_torch.kernels.build reads these
    prototypes to declare the ctypes signatures, so this header is the one place they live. */
 #include <stdint.h>
 

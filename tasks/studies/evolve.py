@@ -1,7 +1,7 @@
 """``snn-neat evolve``: one controller, one seed, on one of the paper's cart-pole tasks; resumable.
 
 The run is checkpointed to ``OUT/evolve.ckpt`` after every ``checkpoint_every`` generations
-(``tasks.experiments.resumable``), with the statistics rows so far, so a killed run continues
+(``tasks.studies.resumable``), with the statistics rows so far, so a killed run continues
 with ``resume=True`` to the same statistics and champion as an uninterrupted one.
 """
 
@@ -14,7 +14,7 @@ from pathlib import Path
 from evolution.config import NEATConfig
 from evolution.neat import NEAT, NEATResult
 from evolution.reporters import StatisticsReporter, StdOutReporter, TqdmReporter
-from tasks.experiments.resumable import RunCheckpoint, open_run
+from tasks.studies.resumable import RunCheckpoint, open_run
 
 __all__ = ["EvolveResult", "run_evolve", "write_evolve_report"]
 
@@ -35,22 +35,15 @@ def run_evolve(controller: str, task: str, seed: int, generations: int, out: str
     """Evolve ``controller`` (snn or sigmoid) on ``task`` (nonmarkov: Table II; markov: Table I)
     for up to ``generations`` generations. ``stop_after`` (generations in this call) exists for
     tests of interruption."""
-    from tasks.experiments.cartpole import (
-        controller_config,
-        describe_ga,
-        ga_choice,
-        markov_config,
-        paper_fitness,
-    )
+    from tasks.studies.registry import describe_ga, study
 
-    table = "table1" if task == "markov" else "table2"
-    preset, extra = ga_choice(table, controller, ga)
-    make_config = markov_config if task == "markov" else controller_config
+    s = study("table1" if task == "markov" else "table2")
+    preset, extra = s.ga_choice(controller, ga)
     identity = {"command": "evolve", "task": task, "controller": controller, "seed": seed, "generations": generations,
                 "self_loops": self_loops, "ga": describe_ga(preset, extra)}
     path = Path(out) / CHECKPOINT
     neat, data = open_run(path, identity, resume=resume, device=device, fresh=lambda: NEAT(
-        make_config(controller, self_loops=self_loops, ga=preset, **extra), seeds=[seed], device=device))
+        s.config(controller, self_loops=self_loops, ga=ga), seeds=[seed], device=device))
     config = neat.config
     stats = neat.add_reporter(StatisticsReporter())
     stats.rows = [dict(row) for row in data.get("statistics", [])]
@@ -60,11 +53,11 @@ def run_evolve(controller: str, task: str, seed: int, generations: int, out: str
                                     records=lambda: {"statistics": stats.rows}, wall_s=float(data.get("wall_s", 0.0))))
     budget = generations - neat.generation
     try:
-        result = neat.run(paper_fitness(table, controller, config),
+        result = neat.run(s.fitness(controller, config),
                           budget if stop_after is None else min(budget, stop_after))
     finally:
         if isinstance(shown, TqdmReporter):
-            shown.end_run(neat)  # closed now: a bar closed at exit would draw over an interruption's message
+            shown.end_run(None)  # closed now: a bar closed at exit would draw over an interruption's message
     return EvolveResult(result, stats, config)
 
 

@@ -1,8 +1,8 @@
 """Entry points into the C kernels that only the tests use.
 
-They live in a library of their own (``evolution/csrc/test_entry_points.c``, exports declared
-in ``test_entry_points.h``), built the first time a test asks, so production builds do not
-compile them. They reach the production kernels' code through the shared headers
+They live in a library of their own (``tests/csrc/kernel_entry_points.c``, exports declared
+in ``kernel_entry_points.h``), built the first time a test asks, so the package neither ships
+nor compiles them. They reach the production kernels' code through the shared headers
 (``box_muller.h``, ``gene_distance.h``), so what they check is what the kernels run.
 """
 
@@ -13,19 +13,21 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
+from evolution import breed_kernel
 from evolution.breed_kernel import GeneBits, _coefficients, _genes_args, _sfx
 from evolution.config import NEATConfig
-from snn_torch._cbuild import KernelLibrary, load_library
+from snn_torch.kernels.build import KernelLibrary, load_library
 
 __all__ = ["library", "gene_distances"]
 
-_CSRC = Path(__file__).resolve().parent / "csrc"
-LIBRARY = ("neat_kernel_tests", _CSRC / "test_entry_points.c", _CSRC / "test_entry_points.h")
+_CSRC = Path(__file__).resolve().parents[1] / "csrc"
+_KERNEL_HEADERS = Path(breed_kernel.__file__).resolve().parent / "csrc"  # box_muller.h, gene_distance.h
+LIBRARY = ("neat_kernel_tests", _CSRC / "kernel_entry_points.c", _CSRC / "kernel_entry_points.h")
 
 
 def library() -> KernelLibrary | None:
     """The test library (``normals_check``, ``distances_f32``/``_f64``), or None without a compiler."""
-    return load_library(*LIBRARY)
+    return load_library(*LIBRARY, include_dirs=[_KERNEL_HEADERS])
 
 
 def gene_distances(a: GeneBits, rows_a: Tensor, b: GeneBits, rows_b: Tensor, cfg: NEATConfig) -> Tensor:

@@ -4,7 +4,7 @@ Eager torch runs one substep of ``P`` recurrent networks as the batched matmul a
 elementwise kernels (Heun's two stages, the crossing time, the reset and its second
 integration), each reading and writing the whole ``[P, N]`` state. On a GPU at large ``P``
 that memory traffic is the whole cost; ``torch.compile`` fuses the elementwise work into a
-few kernels. On the CPU the C kernel (``snn_torch.functional.network_kernel``) is faster
+few kernels. On the CPU the C kernel (``snn_torch.kernels.network``) is faster
 still, so compiling is opt-in there.
 
 The compiled function is ``recurrent_izhikevich_substep`` itself (with spike counting), so the

@@ -1,4 +1,4 @@
-/* Entry points for the tests only (evolution.kernel_tests): built into a library of their own
+/* Entry points for the tests only (tests/evolution/kernel_entry_points.py): built into a library of their own
    when a test asks, so production builds do not compile them. */
 #ifndef SNN_NEAT_TEST_ENTRY_POINTS_H
 #define SNN_NEAT_TEST_ENTRY_POINTS_H

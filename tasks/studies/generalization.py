@@ -1,4 +1,4 @@
-"""Generalisation of a non-Markov cart-pole controller: 625 fixed start states, success rate.
+"""Generalisation tests: Gruau et al.'s 625 start states, for the cart-pole and the double pole.
 
 Gruau, Whitley & Pyeatt (1996) test a pole balancer beyond the single start it was evolved
 on: each of the four state variables takes 0.05, 0.25, 0.5, 0.75 and 0.95 of its range, all
@@ -19,8 +19,11 @@ A start counts as a success when the controller balances for ``steps`` control s
 Everything is batched: ``C`` controllers x ``S`` starts are one rollout of ``S`` episodes per
 controller (``evolution.rollout``: row ``c * S + s`` runs controller ``c`` from start ``s``).
 
-    from tasks.generalization import start_grid, success_rate
+    from tasks.studies.generalization import start_grid, success_rate
     rate = success_rate(champion, config)  # [R, P]: fraction of the 625 starts balanced
+
+The double pole's test (NEAT 2002's, ``generalization_starts`` and ``balanced_steps``) takes the
+same grid over the long pole's variables, with Gruau's own ranges and the short pole at rest.
 """
 
 from __future__ import annotations
@@ -30,15 +33,19 @@ import math
 import torch
 from torch import Tensor
 
+from evolution.ablation import StaticMapController
 from evolution.config import NEATConfig
 from evolution.phenotype import SigmoidSpec, SpikingSpec, make_controller
 from evolution.population import Genomes
 from evolution.rollout import rollout
+from evolution.task import Task
 from tasks.cartpole import DEFAULT_PLANT, CartPoleParams, CartPoleTask, cartpole_failed
-from tasks.experiments.cartpole import NONMARKOV, paper_spec
+from tasks.double_pole import DoublePoleTask
+from tasks.studies.cartpole import NONMARKOV, paper_spec
 
-__all__ = ["GRID_FRACTIONS", "GRID_STEPS", "grid_ranges", "start_grid", "make_policy",
-           "steps_from_starts", "policy_success_rate", "success_rate", "check_starts"]
+__all__ = ["GRID_FRACTIONS", "GRID_STEPS", "gruau_grid", "grid_ranges", "start_grid", "make_policy",
+           "steps_from_starts", "policy_success_rate", "success_rate", "check_starts", "steps_balanced",
+           "GRUAU_RANGES", "GENERALIZATION_STEPS", "generalization_starts", "balanced_steps"]
 
 GRID_FRACTIONS = (0.05, 0.25, 0.5, 0.75, 0.95)  # [Gruau96]
 GRID_STEPS = 1000  # [Gruau96]: balanced for 1000 steps counts as a success
@@ -47,6 +54,21 @@ _THETA_FRACTION = 0.3  # 3.6 degrees of a 12-degree failure angle
 _X_DOT_RANGE = 1.35  # m/s
 _THETA_DOT_RANGE = math.radians(8.6)  # rad/s
 _TAU_S = NONMARKOV["tau_s"]  # [Qiu19] Table II control period, 0.01 s
+
+
+def gruau_grid(ranges: tuple[float, ...], fractions: tuple[float, ...] = GRID_FRACTIONS) -> Tensor:
+    """Every combination of ``fractions`` of each range ``[-a, a]`` (the values ``a (2 f - 1)``),
+    ``[len(fractions) ** len(ranges), len(ranges)]`` float64; the first variable varies slowest
+    (``itertools.product`` order)."""
+    frac = torch.tensor(fractions, dtype=torch.float64)
+    return torch.cartesian_prod(*(a * (2.0 * frac - 1.0) for a in ranges))
+
+
+def steps_balanced(task: Task, controller, starts: Tensor) -> Tensor:
+    """Control steps ``[C, S]`` each of ``controller``'s ``C`` networks balances on ``task`` (up to its
+    ``max_steps``) from each of the ``S`` start states ``starts`` (the task's state rows): one rollout
+    of ``C x S`` episodes, row ``c * S + s`` running network ``c`` from start ``s``."""
+    return rollout(task, controller, episodes=starts.shape[0], starts=starts).steps
 
 
 def grid_ranges(plant: CartPoleParams = DEFAULT_PLANT) -> tuple[float, float, float, float]:
@@ -60,10 +82,7 @@ def start_grid(plant: CartPoleParams = DEFAULT_PLANT, *, device: str | torch.dev
 
     Row order: x varies slowest, theta_dot fastest (``itertools.product`` order).
     """
-    frac = torch.tensor(GRID_FRACTIONS, dtype=torch.float64)
-    axes = [a * (2.0 * frac - 1.0) for a in grid_ranges(plant)]
-    grid = torch.cartesian_prod(*axes)
-    return grid.to(device=device, dtype=dtype)
+    return gruau_grid(grid_ranges(plant)).to(device=device, dtype=dtype)
 
 
 def check_starts(starts: Tensor, plant: CartPoleParams = DEFAULT_PLANT, *, name: str = "starts") -> Tensor:
@@ -93,7 +112,7 @@ def make_policy(genomes: Genomes, config: NEATConfig, controller: str = "snn", *
     if controller not in ("snn", "sigmoid"):
         raise ValueError(f"controller must be 'snn' or 'sigmoid', got {controller!r}")
     spec = paper_spec("table2", controller) if spec is None else spec
-    return make_controller(genomes, config, _task(plant, tau_s, 1), spec, kind=controller, backend=backend)
+    return make_controller(genomes, config, _task(plant, tau_s, 1), spec, backend=backend)
 
 
 def _task(plant: CartPoleParams, tau_s: float, max_steps: int) -> CartPoleTask:
@@ -104,9 +123,8 @@ def steps_from_starts(policy, starts: Tensor, num_controllers: int | None = None
                       tau_s: float = _TAU_S, plant: CartPoleParams = DEFAULT_PLANT) -> Tensor:
     """Steps balanced ``[C, S]`` by each of the ``C`` controllers of ``policy`` from each of ``S``
     starts, as one rollout of ``C x S`` episodes."""
-    starts = check_starts(starts, plant).to(device=policy.weight.device, dtype=policy.weight.dtype)
-    result = rollout(_task(plant, tau_s, max_steps), policy, episodes=starts.shape[0], starts=starts)
-    return result.steps
+    starts = check_starts(starts, plant).to(device=policy.device, dtype=policy.dtype)
+    return steps_balanced(_task(plant, tau_s, max_steps), policy, starts)
 
 
 def policy_success_rate(policy, num_controllers: int | None = None, starts: Tensor | None = None, *,
@@ -129,3 +147,39 @@ def success_rate(genomes: Genomes, config: NEATConfig, *, controller: str = "snn
     policy = make_policy(genomes, config, controller, spec=spec, plant=plant, tau_s=tau_s)
     rate = policy_success_rate(policy, starts=starts, steps=steps, tau_s=tau_s, plant=plant)
     return rate.view(genomes.num_runs, genomes.pop_size)
+
+
+# --- the double pole: NEAT 2002's generalisation test -------------------------------------
+# Gruau et al. (1996)'s test as NEAT 2002 runs it: the long pole's four variables each at 0.05,
+# 0.25, 0.5, 0.75 and 0.95 of these ranges, the short pole at rest (625 starts).
+GRUAU_RANGES = (2.16, 1.35, math.radians(3.6), math.radians(8.6))  # m, m/s, rad, rad/s
+GENERALIZATION_STEPS = 1000  # steps balanced from a start to count it (NEAT 2002)
+
+
+def generalization_starts(*, device: torch.device | str = "cpu") -> Tensor:
+    """The 625 plant states ``[625, 6]`` (float64): x, x_dot, theta1, theta1_dot on the grid, theta2 = 0."""
+    grid = gruau_grid(GRUAU_RANGES)
+    starts = torch.zeros(grid.shape[0], 6, dtype=torch.float64)
+    starts[:, :4] = grid
+    return starts.to(device)
+
+
+def balanced_steps(genomes: Genomes, config: NEATConfig, spec: SpikingSpec | SigmoidSpec | str | None = "snn", *,
+                   velocities: bool = False,
+                   starts: Tensor | None = None, max_steps: int = GENERALIZATION_STEPS,
+                   task: DoublePoleTask | None = None, static_map_steps: int | None = None) -> Tensor:
+    """Control steps ``[R, P, S]`` (int64) each genome balances on the double pole from each start
+    (plant states ``[S, 6]``; default the standard start), up to ``max_steps``: one rollout of every
+    genome x start. ``task``: the evolved task (its plant, start and observation bounds; default: DPV
+    or DPNV's defaults by ``velocities``). ``static_map_steps``: run each controller as a memoryless
+    map settled this many control steps per observation (``evolution.ablation.StaticMapController``)."""
+    task = (DoublePoleTask(velocities=velocities, fitness="steps", max_steps=max_steps) if task is None
+            else task.with_fitness("steps", max_steps))
+    if starts is None:
+        starts = task.reset(1, None, device=genomes.device)
+    else:
+        starts = task.starts(starts.to(device=genomes.device, dtype=torch.float64))
+    controller = make_controller(genomes, config, task, spec)
+    if static_map_steps is not None:
+        controller = StaticMapController(controller, static_map_steps)
+    return steps_balanced(task, controller, starts).view(genomes.num_runs, genomes.pop_size, -1)

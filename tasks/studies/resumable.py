@@ -13,22 +13,28 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import torch
+
 from evolution.checkpoint import CheckpointError, atomic_torch_save, load_checkpoint_dict
 from evolution.neat import NEAT
-from evolution.reporters import BaseReporter
-from tasks.experiments.reproduce import ReproduceError
+from evolution.reporters import BaseReporter, GenerationStatus
+from tasks.studies.registry import ReproduceError
 
 __all__ = ["RunCheckpoint", "open_run"]
 
 
-def open_run(path: str | os.PathLike, identity: dict, *, resume: bool, device: str,
-             fresh: Callable[[], NEAT]) -> tuple[NEAT, dict]:
+def open_run(path: str | os.PathLike, identity: dict, *, resume: bool, device: str | torch.device,
+             fresh: Callable[[], NEAT], missing_ok: bool = False, defaults: dict | None = None) -> tuple[NEAT, dict]:
     """The run to continue: ``path``'s (which needs ``resume``, and the same ``identity``) or
     ``fresh()`` (which needs no ``resume``: a ``--resume`` with nothing to continue is an error,
-    not a silent new start). Returns ``(neat, checkpoint)`` (``{}`` for a fresh run)."""
+    not a silent new start, unless ``missing_ok``: one of several checkpoints a command resumes
+    may not have been written yet). ``defaults``: the value an identity key had before it was
+    recorded, so older checkpoints resume. Returns ``(neat, checkpoint)`` (``{}`` for a fresh run).
+    The one resume check of every command (``reproduce``, ``evolve``, ``xor``)."""
     path = Path(path)
+    defaults = defaults or {}
     if not path.exists():
-        if resume:
+        if resume and not missing_ok:
             raise ReproduceError(f"--resume: there is no checkpoint {path} to continue; "
                                  "run without --resume to start afresh")
         return fresh(), {}
@@ -36,10 +42,14 @@ def open_run(path: str | os.PathLike, identity: dict, *, resume: bool, device: s
         raise ReproduceError(f"{path} exists: pass --resume to continue it, or choose another --out")
     data = load_checkpoint_dict(path, map_location="cpu")
     saved = data.get("identity")
-    if not isinstance(saved, dict) or not isinstance(data.get("neat"), dict):
-        raise ReproduceError(f"cannot resume {path}: it is not a checkpoint of `snn-neat {identity['command']}`")
+    command = identity.get("command", "reproduce")
+    if not isinstance(data.get("neat"), dict):
+        raise CheckpointError(f"checkpoint {str(path)!r} is malformed: it holds no NEAT state, so it is not a "
+                              f"checkpoint of `snn-neat {command}`")
+    if not isinstance(saved, dict):
+        raise ReproduceError(f"cannot resume {path}: it is not a checkpoint of `snn-neat {command}`")
     for key, value in identity.items():
-        if saved.get(key) != value:
+        if saved.get(key, defaults.get(key)) != value:
             raise ReproduceError(f"cannot resume {path}: it was written with {key}={saved.get(key)!r}, "
                                  f"this call asks for {key}={value!r}")
     neat = NEAT.from_state_dict(data["neat"], device=device, name=str(path))
@@ -74,20 +84,22 @@ class RunCheckpoint(BaseReporter):
         """Seconds of evolution so far, over every process that worked on the run."""
         return self._wall0 + time.perf_counter() - self._start
 
-    def finished(self, neat: NEAT) -> bool:
-        return neat.generation >= self.generations or not bool(neat.active_runs.any())
+    def finished(self, neat: NEAT | GenerationStatus) -> bool:
+        """The run is over: its budget spent, or every run solved (of a driver or its last status)."""
+        done = neat.generations_done if isinstance(neat, GenerationStatus) else neat.generation
+        return done >= self.generations or not bool(neat.active_runs.any())
 
-    def due(self, neat: NEAT) -> bool:
+    def due(self, status: GenerationStatus) -> bool:
         if self.every is None:
             return time.perf_counter() - self._last >= self.interval_s
-        return neat.generation % self.every == 0
+        return status.generations_done % self.every == 0
 
-    def end_generation(self, neat: NEAT) -> None:
-        if self.due(neat) or self.finished(neat):
-            self.save(neat)
+    def end_generation(self, status: GenerationStatus) -> None:
+        if self.due(status) or self.finished(status):
+            self.save(status)
 
-    def save(self, neat: NEAT) -> Path:
-        state = neat.state_dict()
+    def save(self, status: GenerationStatus) -> Path:
+        state = status.state_dict()
         path = atomic_torch_save({"format": state["format"], "version": state["version"], "identity": self.identity,
                                   "neat": state, "wall_s": self.wall_s, **self.records()}, self.path)
         self._last = time.perf_counter()

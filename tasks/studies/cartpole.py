@@ -19,11 +19,12 @@ from evolution.phenotype import SPIKING_SIGMA, SigmoidSpec, SpikingSpec
 from evolution.population import Genomes
 from evolution.rollout import TaskFitness
 from tasks.cartpole import DEFAULT_PLANT, THETA0_RAD, CartPoleParams, CartPoleTask
+from tasks.studies.registry import CONTROLLERS, ga_overrides
 
-__all__ = ["CODINGS", "PAPER_SPECS", "paper_task", "paper_spec", "paper_fitness", "CONTROLLERS", "GA_PRESETS", "GA_CHOICES", "TUNED_GA", "ga_overrides", "ga_choice", "describe_ga", "NONMARKOV", "MARKOV", "controller_config", "nonmarkov_start", "nonmarkov_fitness",
-           "markov_config", "markov_fitness", "markov_start"]
+__all__ = ["CODINGS", "PAPER_SPECS", "paper_task", "paper_spec", "paper_fitness", "CONTROLLERS", "NONMARKOV", "MARKOV",
+           "controller_config", "nonmarkov_start", "nonmarkov_fitness", "markov_config", "markov_fitness", "markov_start",
+           "study_task", "study_spec", "study_config", "study_fitness", "study_solved"]
 
-CONTROLLERS = ("snn", "sigmoid")
 # [Qiu19] Table II: tau 0.01 s, start theta = 3 degrees, success at 5000 steps.
 NONMARKOV = {"tau_s": 0.01, "theta0_rad": THETA0_RAD, "max_steps": 5000}
 # [Qiu19] Table I: tau 0.02 s, success at 100,000 steps. The paper gives no start state for
@@ -76,66 +77,6 @@ def paper_spec(table: str, controller: str, coding: str = "study") -> SpikingSpe
     return replace(spec, input_coding="push_pull" if bernoulli else "signed")
 
 
-# GA settings, as named presets over NEATConfig. "neat-c++": NEATConfig's defaults ([NEAT02],
-# [Qiu19], and NEAT C++'s weight mutation). "neat-python": neat-python 2.0.0's defaults wherever
-# they differ and this NEAT has the knob (per-gene weight mutation of power 0.5 within +-30, its
-# 2 best genomes of every species kept, crossover for every child, no interspecies mating,
-# stagnation after 20 generations, distance weight term 0.5 and genes counted by the larger
-# genome at any size). neat-python's node bias genes are this NEAT's bias-input connections.
-GA_PRESETS: dict[str, dict] = {
-    "neat-c++": {},
-    "neat-python": dict(weight_mutate_power=0.5, weight_mutate_per_gene=True, weight_max_value=30.0,
-                        weight_min_value=-30.0, elitism=2, elitism_min_species_size=1, crossover_prob=1.0,
-                        interspecies_crossover_prob=0.0, max_stagnation=20, compatibility_weight_coefficient=0.5,
-                        compatibility_normalize_min_genes=1),
-}
-
-
-# Each controller's GA settings per table, as used by ``snn-neat reproduce`` (``--ga tuned``):
-# picked by ``python -m experiments.tune_ga`` on tuning seeds 5000-5059 (5000-5031 for
-# NEAT-SNN on Table I), never on a reported seed set, from the same grid for every controller:
-# both presets x survival threshold 0.1 or 0.2 ([Qiu19]'s); for NEAT-SNN on Table I only the
-# neat-c++ preset (its 100,000-step spiking episodes made the neat-python runs too costly). The
-# numbers behind each pick are in docs/reproducing.md ("GA settings, chosen per controller"). Table II
-# was re-tuned under the counter-based streams (NEAT-SNN: survival 0.1 -> 0.2, mean 12.35 ->
-# 11.08; sigmoid NEAT unchanged); Table I's picks date from the earlier mt19937 streams.
-TUNED_GA: dict[tuple[str, str], tuple[str, dict]] = {
-    ("table1", "sigmoid"): ("neat-python", {"survival_threshold": 0.1}),
-    ("table1", "snn"): ("neat-c++", {}),
-    ("table2", "sigmoid"): ("neat-python", {"survival_threshold": 0.1}),
-    ("table2", "snn"): ("neat-c++", {}),
-    # double pole (tasks.experiments.double_pole): picked on tuning seeds 5000-5009, 40
-    # generations of DPV; DPNV takes DPV's pick (docs/beyond-the-paper.md)
-    ("dpv", "sigmoid"): ("neat-python", {"survival_threshold": 0.1}),
-    ("dpv", "snn"): ("neat-python", {"survival_threshold": 0.1}),
-    ("dpnv", "sigmoid"): ("neat-python", {"survival_threshold": 0.1}),
-    ("dpnv", "snn"): ("neat-python", {"survival_threshold": 0.1}),
-}
-GA_CHOICES = ("tuned", *GA_PRESETS)
-
-
-def ga_choice(table: str, controller: str, ga: str = "tuned") -> tuple[str, dict]:
-    """``(preset, extra overrides)`` for ``ga``: a preset name as it is, or ``"tuned"``: the
-    controller's pick for the table (``TUNED_GA``)."""
-    if ga == "tuned":
-        return TUNED_GA[(table, controller)]
-    if ga not in GA_PRESETS:
-        raise ValueError(f"ga must be one of {GA_CHOICES}, got {ga!r}")
-    return ga, {}
-
-
-def describe_ga(preset: str, extra: dict) -> str:
-    """``"neat-python, survival_threshold=0.1"``: a GA choice in words, for tables and checkpoints."""
-    return ", ".join([preset, *(f"{k}={v:g}" for k, v in sorted(extra.items()))])
-
-
-def ga_overrides(ga: str) -> dict:
-    """The ``NEATConfig`` fields a GA preset sets (``GA_PRESETS``)."""
-    if ga not in GA_PRESETS:
-        raise ValueError(f"ga must be one of {tuple(GA_PRESETS)}, got {ga!r}")
-    return dict(GA_PRESETS[ga])
-
-
 def controller_config(controller: str, *, self_loops: bool = False, ga: str = "neat-c++", coding: str = "study",
                       **overrides) -> NEATConfig:
     """The NEAT config of a controller for the non-Markov task, under GA preset ``ga`` (``coding``:
@@ -174,7 +115,7 @@ def paper_fitness(table: str, controller: str, config: NEATConfig, *, spec: Spik
     """``TaskFitness`` of ``controller`` on ``table``'s task with the paper's coding (``PAPER_SPECS``,
     or its signed variant: ``paper_spec``)."""
     spec = paper_spec(table, controller, coding) if spec is None else spec
-    return TaskFitness(paper_task(table, plant=plant, max_steps=max_steps), config, controller, spec, backend=backend)
+    return TaskFitness(paper_task(table, plant=plant, max_steps=max_steps), config, spec, backend=backend)
 
 
 def markov_config(controller: str, *, self_loops: bool = False, ga: str = "neat-c++", coding: str = "study",
@@ -205,3 +146,33 @@ def markov_fitness(controller: str, config: NEATConfig, *, spec: SpikingSpec | S
     """``fitness_fn(genomes) -> [R, P]``: control steps balanced on the Markov task (Table I)."""
     return paper_fitness("table1", controller, config, spec=spec, plant=plant, max_steps=max_steps, backend=backend,
                          coding=coding)
+
+
+# --- the paper's tables as studies (tasks.studies.registry) ----------------------------------
+def study_task(table: str, coding: str = "study") -> CartPoleTask:
+    """The task of ``table`` (the coding does not change the plant)."""
+    return paper_task(table)
+
+
+def study_spec(table: str, controller: str, coding: str = "study") -> SpikingSpec | SigmoidSpec:
+    """``paper_spec``."""
+    return paper_spec(table, controller, coding)
+
+
+def study_config(table: str, controller: str, *, self_loops: bool = False, ga: str = "neat-c++",
+                 coding: str = "study", **overrides) -> NEATConfig:
+    """``markov_config`` (Table I) or ``controller_config`` (Table II)."""
+    make = {"table1": markov_config, "table2": controller_config}.get(table)
+    if make is None:
+        raise ValueError(f"table must be 'table1' or 'table2', got {table!r}")
+    return make(controller, self_loops=self_loops, ga=ga, coding=coding, **overrides)
+
+
+def study_fitness(table: str, controller: str, config: NEATConfig, coding: str = "study") -> TaskFitness:
+    """``paper_fitness``: control steps balanced."""
+    return paper_fitness(table, controller, config, coding=coding)
+
+
+def study_solved(table: str, controller: str, config: NEATConfig, coding: str = "study") -> None:
+    """None: the config's fitness threshold (the table's episode length) decides."""
+    return None

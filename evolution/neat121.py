@@ -1,0 +1,97 @@
+"""NEAT C++ 1.2.1's parameter files for double-pole balancing as ``NEATConfig`` presets.
+
+``NEAT121_DPV`` transcribes ``pole2_markov.ne`` (with velocities), ``NEAT121_DPNV``
+``p2nv.ne`` (without): each value is commented with its NEAT 1.2.1 key. They set no network
+layout (``num_inputs``, ``num_outputs``, ``num_bias``): the caller does, as for any task.
+
+Where the presets only approximate NEAT 1.2.1 (``NEATConfig`` has no option for it):
+- ``newlink_tries`` (20 random tries at a free slot of the kind drawn): ours picks among all
+  free slots of that kind, so it fails only where none is left.
+- slot order stands for gene (innovation) order: the tail of ``mutate_link_weights``, the gene
+  ``mutate_toggle_enable`` picks and the first disabled gene ``mutate_gene_reenable`` enables.
+- delta coding when a run has a single species: NEAT 1.2.1 gives it ``pop - pop // 2``
+  offspring (the population shrinks), ours all of them.
+- parents per species ``floor(survival_thresh * size + 1)`` (ours ``ceil(survival * size)``),
+  a new link's weight uniform in +-1 (ours ``weight_init_*``), the interspecies mate a
+  species champion (ours any species' parent), and the stagnation clock read before this
+  generation's improvement (ours after: a species improving just then is not penalised).
+- ``mate_only_prob``: NEAT 1.2.1 still mutates a child of two identical genomes.
+- ``age_significance`` (1.0 in both files: no effect) and ``babies_stolen`` (0: none) need
+  nothing; ``mate_singlepoint_prob`` is 0 in both.
+"""
+
+from __future__ import annotations
+
+from evolution.config import ConfigError, NEATConfig
+
+# [NEATC] Species::reproduce under delta coding: a champion's clone gets a new link (20 %), else its
+# weights mutated (80 %).
+CLONE_LINK_PROB = 0.2
+
+__all__ = ["NEAT121_DPV", "NEAT121_DPNV", "neat121_config", "CLONE_LINK_PROB"]
+
+NEAT121_DPV: dict = {
+    "pop_size": 150,  # PopulationSize
+    "weight_mutate_power": 2.5,  # weight_mut_power
+    "compatibility_disjoint_coefficient": 1.0,  # disjoint_coeff
+    "compatibility_excess_coefficient": 1.0,  # excess_coeff
+    "compatibility_weight_coefficient": 0.4,  # mutdiff_coeff
+    "compatibility_threshold": 3.0,  # compat_thresh
+    # Genome::compatibility sums, never divides by the gene count
+    "compatibility_normalize_min_genes": 1_000_000_000,
+    "survival_threshold": 0.2,  # survival_thresh
+    "crossover_prob": 0.75,  # 1 - mutate_only_prob (0.25)
+    "weight_mutate_rate": 0.9,  # mutate_link_weights_prob
+    "weight_mutate_neatc": True,  # Genome::mutate_link_weights (uniform steps, "severe" genomes)
+    "weight_min_value": -8.0,  # mutate_link_weights caps weights at -8 ...
+    "weight_max_value": 8.0,  # ... and +8
+    "enabled_mutate_rate": 0.0,  # NEAT 1.2.1 toggles genes one per child, below
+    "toggle_enable_prob": 0.0,  # mutate_toggle_enable_prob
+    "gene_reenable_prob": 0.0,  # mutate_gene_reenable_prob
+    "conn_add_recurrence": True,  # Genome::mutate_add_link chooses recurrent or not ...
+    "recur_only_prob": 0.0,  # ... recurrent with recur_only_prob
+    "node_add_prob": 0.03,  # mutate_add_node_prob
+    "conn_add_prob": 0.05,  # mutate_add_link_prob
+    "mutation_exclusive": True,  # Species::reproduce: add node, else add link, else the rest
+    "interspecies_crossover_prob": 0.001,  # interspecies_mate_rate
+    "crossover_average_prob": 0.4,  # mate_multipoint_avg_prob (mate_multipoint_prob 0.6, singlepoint 0)
+    "mate_only_prob": 0.2,  # mate_only_prob
+    "disabled_inherit_prob": 0.75,  # Genome::mate_*: a gene disabled in a parent, 75 %
+    # dropoff_age 15: Species::adjust_fitness penalises from age_debt = (age - age_of_last_improvement
+    # + 1) - dropoff_age = 0 on (0 counts as 1), i.e. from 14 generations without improvement
+    "max_stagnation": 14,
+    "stagnant_fitness_factor": 0.01,  # Species::adjust_fitness: fitness * 0.01 past dropoff_age
+    "species_elitism": 0,  # no species is spared the penalty
+    "obliterate_interval": 30,  # Population::epoch: every 30 generations ...
+    "obliterate_min_age": 20,  # ... the worst species of age >= 20
+    "population_stagnation": 20,  # highest_last_changed >= dropoff_age + 5: delta coding
+    "elitism": 1,  # Species::reproduce: the champion cloned ...
+    "elitism_min_species_size": 6,  # ... when the species expects more than 5 offspring (ours: has > 5 members)
+}
+
+NEAT121_DPNV: dict = {
+    **NEAT121_DPV,
+    "pop_size": 1000,  # PopulationSize
+    "weight_mutate_power": 1.8,  # weight_mut_power
+    "compatibility_weight_coefficient": 3.0,  # mutdiff_coeff
+    "compatibility_threshold": 4.0,  # compat_thresh
+    "survival_threshold": 0.4,  # survival_thresh
+    "weight_mutate_rate": 0.8,  # mutate_link_weights_prob
+    "node_add_prob": 0.01,  # mutate_add_node_prob
+    "conn_add_prob": 0.3,  # mutate_add_link_prob
+    "toggle_enable_prob": 0.1,  # mutate_toggle_enable_prob
+    "gene_reenable_prob": 0.05,  # mutate_gene_reenable_prob
+    "recur_only_prob": 0.2,  # recur_only_prob
+}
+
+_VARIANTS = {"dpv": NEAT121_DPV, "dpnv": NEAT121_DPNV}
+
+
+def neat121_config(variant: str, **overrides) -> NEATConfig:
+    """The ``NEATConfig`` of NEAT C++ 1.2.1's ``variant`` ("dpv": ``pole2_markov.ne``, "dpnv":
+    ``p2nv.ne``; a ``neat-1.2.1-`` prefix is accepted), with ``overrides`` (the network
+    layout at least) on top."""
+    key = variant.lower().removeprefix("neat-1.2.1-")
+    if key not in _VARIANTS:
+        raise ConfigError(f"neat121_config: variant must be one of {sorted(_VARIANTS)}, got {variant!r}")
+    return NEATConfig(**{**_VARIANTS[key], **overrides})

@@ -1,0 +1,149 @@
+"""Run a study's controller over many seeds in one batch, resumable: ``run_controller``.
+
+All runs of one controller evolve in one batch (run axis R) through ``NEAT.run``, with reporters
+for the progress bar, the best-fitness history (Fig. 8) and the checkpoint: after every
+``checkpoint_every`` generations the whole state (NEAT state with its RNG streams, the history,
+and the study's test state where it has one) is written atomically to ``OUT/<controller>.ckpt``
+(``tasks.studies.resumable``), so a reproduction killed at any point resumes with
+``resume=True`` and ends with the same table as an uninterrupted one. Solved runs are frozen
+(not evaluated again).
+
+A run's score is its solving generation (1-based, as the paper counts); a run that does
+not solve within ``generations`` counts as ``generations + 1`` (the paper's 101).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import torch
+from torch import Tensor
+
+from evolution.checkpoint import CheckpointError
+from evolution.config import NEATConfig
+from evolution.neat import NEAT
+from evolution.reporters import BaseReporter, GenerationStatus, TqdmReporter
+from tasks.studies.registry import STUDIES, ReproduceError, describe_ga, study
+from tasks.studies.results import ControllerRuns
+from tasks.studies.resumable import RunCheckpoint, open_run
+
+__all__ = ["TASKS", "ReproduceError", "ControllerRuns", "run_controller", "study_config", "write_report",
+           "FIG8_MAX_PAD"]
+
+TASKS = tuple(STUDIES)
+IDENTITY_DEFAULTS = {"coding": "study", "champion_test": "champion"}  # checkpoints from before the key: this value
+# Fig. 8 draws solved runs' final best up to the budget, or this many generations where the
+# budget is larger (evolution itself may go on longer; its generations are all drawn).
+FIG8_MAX_PAD = 10_000
+
+
+def study_config(task_name: str, controller: str, *, self_loops: bool = False, ga: str = "tuned",
+                 coding: str = "study") -> NEATConfig:
+    """The NEAT config ``run_controller`` evolves ``controller`` with on ``task_name``
+    (``STUDIES[task_name].config``; the CLI's memory check reads it too)."""
+    return study(task_name).config(controller, self_loops=self_loops, ga=ga, coding=coding)
+
+
+def write_report(results: dict[str, ControllerRuns], table: str, out: str | os.PathLike, *, command: str,
+                 generalization: bool = True) -> list[Path]:
+    """The study's report of ``results`` (``STUDIES[table].write_report``). Returns the paths written."""
+    return study(table).write_report(results, out, command=command, generalization=generalization)
+
+
+class _History(BaseReporter):
+    """Each generation's best fitness so far per run, ``[R]`` float64 (Fig. 8's data)."""
+
+    def __init__(self, rows: list[Tensor]) -> None:
+        self.rows = rows
+
+    def end_generation(self, status: GenerationStatus) -> None:
+        self.rows.append(status.best_fitness.detach().cpu().clone())
+
+    def stacked(self, runs: int) -> Tensor:
+        return torch.stack(self.rows) if self.rows else torch.zeros(0, runs, dtype=torch.float64)
+
+
+def _checked_history(path: Path, data: dict, neat: NEAT) -> list[Tensor]:
+    """A checkpoint's Fig. 8 history (one ``[R]`` float64 row per generation), checked: a crafted or
+    damaged file stops here, naming itself."""
+    history = data.get("history")
+    shape = (neat.generation, neat.num_runs)
+    if not isinstance(history, Tensor) or history.dtype != torch.float64 or tuple(history.shape) != shape:
+        got = (tuple(history.shape), history.dtype) if isinstance(history, Tensor) else type(history).__name__
+        raise CheckpointError(f"checkpoint {str(path)!r} is malformed: its history should be {shape} float64 "
+                              f"(generations, runs), got {got}")
+    return list(history.unbind(0))
+
+
+def run_controller(task_name: str, controller: str, seeds: list[int], generations: int, out: str | os.PathLike,
+                   *, resume: bool = False, self_loops: bool = False, ga: str = "tuned", checkpoint_every: int = 1,
+                   device: str | torch.device = "cpu", progress: bool = True,
+                   stop_after: int | None = None, coding: str = "study",
+                   champion_test: str = "champion") -> ControllerRuns:
+    """Evolve ``controller`` on the study ``task_name`` (``STUDIES``) for each seed (one batch),
+    checkpointing to ``out``.
+
+    ``resume`` continues from ``OUT/<controller>.ckpt`` (which must have been written with
+    the same task, seeds, budget and start genome); without it an existing checkpoint is an
+    error, so a finished reproduction is never overwritten by accident. ``ga``: a GA preset of
+    ``tasks.studies.registry.GA_PRESETS``, or ``"tuned"`` (default), the controller's own
+    pick for the study. ``coding``: the study's input coding (``"study"``, or ``"signed"``).
+    ``champion_test``: the test of a generation the study offers (DPNV: ``"champion"``, each
+    run's overall champion every generation, or ``"species"``, NEAT C++ 1.2.1's champion of the
+    best species not tested since it improved; its record is kept in the checkpoint).
+    ``stop_after`` (generations in this call) exists for tests of interruption.
+    """
+    s = study(task_name)
+    s._check(controller, coding, champion_test)
+    preset, ga_extra = s.ga_choice(controller, ga)
+    if checkpoint_every < 1:
+        raise ReproduceError(f"checkpoint_every must be >= 1, got {checkpoint_every}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"{controller}.ckpt"
+    ga_text = describe_ga(preset, ga_extra)
+    identity = {"task": task_name, "controller": controller, "seeds": list(seeds), "generations": generations,
+                "self_loops": self_loops, "ga": ga_text, "coding": coding, "champion_test": champion_test}
+    neat, data = open_run(path, identity, resume=resume, device=device, missing_ok=True, defaults=IDENTITY_DEFAULTS,
+                          fresh=lambda: NEAT(s.config(controller, self_loops=self_loops, ga=ga, coding=coding),
+                                             seeds=seeds, device=device))
+    config = neat.config
+    fitness_fn = s.fitness(controller, config, coding)
+    solved_fn = s.solved(controller, config, coding, champion_test=champion_test, neat=neat)
+    if data.get("solved_state") is not None and hasattr(solved_fn, "load_state_dict"):
+        try:
+            solved_fn.load_state_dict(data["solved_state"])
+        except ValueError as exc:
+            raise CheckpointError(f"checkpoint {str(path)!r} is malformed: {exc}") from None
+
+    history = _History(_checked_history(path, data, neat) if data else [])
+    neat.add_reporter(history)
+    bar = neat.add_reporter(TqdmReporter(total=generations, initial=neat.generation, desc=f"{task_name} {controller}",
+                                         disable=not progress, file=sys.stderr))
+
+    def records() -> dict:
+        state = {"solved_state": solved_fn.state_dict()} if hasattr(solved_fn, "state_dict") else {}
+        return {"history": history.stacked(len(seeds)), **state}
+
+    checkpoint = neat.add_reporter(RunCheckpoint(path, identity, generations, every=checkpoint_every, records=records,
+                                                 wall_s=float(data.get("wall_s", 0.0))))
+    budget = max(generations - neat.generation, 0)
+    try:
+        neat.run(fitness_fn, budget if stop_after is None else min(budget, stop_after), solved_fn=solved_fn)
+    finally:
+        bar.end_run(None)  # closed now: a bar closed at exit would draw over an interruption's message
+    hist = history.stacked(len(seeds))
+    # Runs that solved early keep their final best for the rest of the budget (Fig. 8), drawn
+    # up to FIG8_MAX_PAD generations: a budget of 10**12 cannot be padded (nor plotted).
+    pad_to = min(generations, max(hist.shape[0], FIG8_MAX_PAD))
+    if 0 < hist.shape[0] < pad_to:
+        hist = torch.cat([hist, hist[-1:].expand(pad_to - hist.shape[0], -1)])
+    return ControllerRuns(controller=controller, seeds=list(seeds), generations=generations,
+                          solved_generation=neat.solved_generation.cpu().tolist(),
+                          best_fitness=neat.best_fitness.cpu().tolist(), history=hist,
+                          champions=neat.best_genomes.to("cpu"), config=config, wall_s=checkpoint.wall_s,
+                          extra={"complete": checkpoint.finished(neat), "ga": ga_text, "coding": coding,
+                                 "champion_test": champion_test,
+                                 "solved_position": neat.solved_position.cpu().tolist()})
