@@ -239,6 +239,7 @@ class NEAT:
             for name, t in children.tensors().items():
                 t[idx if all_runs else sub[0][idx]] = getattr(fresh, name)
             sp.alive[idx] = False
+            sp.obliterated[idx], sp.run_best[idx], sp.run_stale[idx] = False, -torch.inf, 0  # a fresh run's records
             self._extinct_now.extend(evolving[i] for i in gone)
         species, sp = speciate(children, sp, cfg, rng, self.generation + 1, fused=fused, runs=runs,
                                genes=genes)

@@ -92,7 +92,7 @@ ENVIRONMENTS: dict[str, EnvSetting] = {
 }
 CONTROLLERS = ("snn", "sigmoid")
 SEEDS = (0, 1, 2, 3, 4)
-# the study's GA (the double pole's pick for both controllers, tasks.studies.cartpole.TUNED_GA)
+# the study's GA (the double pole's pick for both controllers, tasks.studies.registry.STUDIES["dpv"].tuned_ga)
 GA = {**ga_overrides("neat-python"), "survival_threshold": 0.1, "max_hidden": 16}
 CONFIRM_CANDIDATES = 5  # genomes reaching the threshold in training checked on the held-out episodes
 FINAL_CANDIDATES = 20  # of the final generation, re-evaluated when no genome was confirmed

@@ -39,7 +39,7 @@ def main() -> None:
     p.add_argument("--seeds", type=int, default=8)
     p.add_argument("--gens", type=int, default=30)
     p.add_argument("--pop", type=int, default=None, help="population (default: the study's, 150 DPV / 1000 DPNV)")
-    p.add_argument("--ga", default="tuned", help="GA preset, or 'tuned': the study's pick (TUNED_GA)")
+    p.add_argument("--ga", default="tuned", help="GA preset, or 'tuned': the study's pick (STUDIES[...].tuned_ga)")
     p.add_argument("--cfg", default="{}")
     p.add_argument("--spec", default="{}")
     p.add_argument("--bounds", default=None, help="JSON list of symmetric observation bounds")

@@ -357,7 +357,8 @@ def build_parser() -> argparse.ArgumentParser:
     evo.add_argument("--self-loops", action="store_true",
                      help="start with an output self-connection (neat-python's full start)")
     evo.add_argument("--ga", choices=GA_CHOICES, default="tuned",
-                     help="GA settings (default: tuned, the controller's pick for the task; or neat-c++, neat-python)")
+                     help="GA settings (default: tuned, the controller's pick for the task; or a preset: "
+                          + ", ".join(GA_CHOICES[1:]) + ")")
     evo.add_argument("--out", default="results/evolve", help="output folder (default: results/evolve)")
     evo.add_argument("--verbose", action="store_true", help="a line per generation instead of a progress bar")
     evo.add_argument("--report-every", type=_positive_int, default=1, help="with --verbose: every N generations")
@@ -386,7 +387,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="start genomes with an output self-connection (sensitivity check; the paper has none)")
     rep.add_argument("--ga", choices=GA_CHOICES, default="tuned",
                      help="GA settings: 'tuned' (default), each controller's own pick for the table, made on tuning "
-                          "seeds; or one preset for both: neat-c++ (NEAT 2002 / NEAT C++) or neat-python (its defaults)")
+                          "seeds; or one preset for both: neat-c++ (NEAT 2002 / NEAT C++), neat-python (its defaults), "
+                          "neat-1.2.1-dpv or neat-1.2.1-dpnv (NEAT C++ 1.2.1's double-pole parameter files, their "
+                          "populations included)")
     rep.add_argument("--coding", choices=CODINGS, default=CODINGS[0],
                      help="how observations reach the networks: 'study' (default: the paper's, or the double-pole "
                           "study's: [0, 1] over the bounds) or 'signed' (double pole: NEAT C++ 1.2.1's x/4.8, x_dot/2, "

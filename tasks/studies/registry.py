@@ -23,19 +23,44 @@ __all__ = ["CONTROLLERS", "GA_PRESETS", "GA_CHOICES", "Study", "STUDIES", "Repro
 
 CONTROLLERS = ("snn", "sigmoid")
 
-# GA settings, as named presets over NEATConfig. "neat-c++": NEATConfig's defaults ([NEAT02],
-# [Qiu19], and NEAT C++'s weight mutation). "neat-python": neat-python 2.0.0's defaults wherever
-# they differ and this NEAT has the knob (per-gene weight mutation of power 0.5 within +-30, its
-# 2 best genomes of every species kept, crossover for every child, no interspecies mating,
-# stagnation after 20 generations, distance weight term 0.5 and genes counted by the larger
-# genome at any size). neat-python's node bias genes are this NEAT's bias-input connections.
-GA_PRESETS: Mapping[str, Mapping] = MappingProxyType({
-    "neat-c++": MappingProxyType({}),
-    "neat-python": MappingProxyType(dict(
-        weight_mutate_power=0.5, weight_mutate_per_gene=True, weight_max_value=30.0, weight_min_value=-30.0,
-        elitism=2, elitism_min_species_size=1, crossover_prob=1.0, interspecies_crossover_prob=0.0,
-        max_stagnation=20, compatibility_weight_coefficient=0.5, compatibility_normalize_min_genes=1)),
-})
+class _GAPresets(Mapping):
+    """GA settings, as named presets over NEATConfig (name -> overrides).
+
+    "neat-c++": NEATConfig's defaults ([NEAT02], [Qiu19], and NEAT C++'s weight mutation).
+    "neat-python": neat-python 2.0.0's defaults wherever they differ and this NEAT has the knob
+    (per-gene weight mutation of power 0.5 within +-30, its 2 best genomes of every species
+    kept, crossover for every child, no interspecies mating, stagnation after 20 generations,
+    distance weight term 0.5 and genes counted by the larger genome at any size); neat-python's
+    node bias genes are this NEAT's bias-input connections. "neat-1.2.1-dpv" and
+    "neat-1.2.1-dpnv": NEAT C++ 1.2.1's own parameter files for double-pole balancing
+    (``pole2_markov.ne``, ``p2nv.ne``; ``evolution.neat121``, with their populations of 150 and
+    1000), loaded on first use: that module needs torch, and this one must not.
+    """
+
+    _OWN = {
+        "neat-c++": {},
+        "neat-python": dict(
+            weight_mutate_power=0.5, weight_mutate_per_gene=True, weight_max_value=30.0, weight_min_value=-30.0,
+            elitism=2, elitism_min_species_size=1, crossover_prob=1.0, interspecies_crossover_prob=0.0,
+            max_stagnation=20, compatibility_weight_coefficient=0.5, compatibility_normalize_min_genes=1),
+    }
+    _NEAT121 = {"neat-1.2.1-dpv": "NEAT121_DPV", "neat-1.2.1-dpnv": "NEAT121_DPNV"}
+
+    def __getitem__(self, name: str) -> Mapping:
+        if name in self._OWN:
+            return MappingProxyType(self._OWN[name])
+        if name in self._NEAT121:
+            return MappingProxyType(getattr(importlib.import_module("evolution.neat121"), self._NEAT121[name]))
+        raise KeyError(name)
+
+    def __iter__(self):
+        return iter([*self._OWN, *self._NEAT121])
+
+    def __len__(self) -> int:
+        return len(self._OWN) + len(self._NEAT121)
+
+
+GA_PRESETS: Mapping[str, Mapping] = _GAPresets()
 GA_CHOICES = ("tuned", *GA_PRESETS)
 
 

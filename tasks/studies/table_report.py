@@ -56,7 +56,7 @@ def format_markdown(summary: dict, seeds: list[int], command: str) -> str:
     lines += ["", "Median and mean count a failed run (no solution within the budget) as budget + 1 generations."]
     ga = [f"{LABELS.get(c, c)}: {row['ga']}" for c, row in summary["rows"].items() if row.get("ga")]
     if ga:
-        lines.append("GA settings (tasks/studies/cartpole.py, GA_PRESETS and TUNED_GA): " + "; ".join(ga) + ".")
+        lines.append("GA settings (tasks/studies/registry.py, GA_PRESETS and each study's tuned_ga): " + "; ".join(ga) + ".")
     if any(row.get("coding") == "signed" for row in summary["rows"].values()):
         lines.append("Input coding: signed (`--coding signed`, a sensitivity study, not the paper's): each observation "
                      "in [-1, 1] over the paper's bounds, centred; the Bernoulli encoder's as push-pull pairs of input "

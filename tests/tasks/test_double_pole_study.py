@@ -192,3 +192,17 @@ def test_reproduce_dpnv_with_neat_121s_test_resumes_to_the_same_bits(tmp_path):
         run_controller("dpnv", "sigmoid", [0, 1], 3, tmp_path / "split", progress=False, resume=True)
     with pytest.raises(ReproduceError, match="'species' only for dpnv"):
         run_controller("dpv", "sigmoid", [0], 1, tmp_path / "dpv", progress=False, champion_test="species")
+
+
+def test_neat_121_presets_reach_the_study_config_through_the_registry():
+    from evolution.neat121 import NEAT121_DPNV, NEAT121_DPV
+    from tasks.studies.registry import GA_CHOICES, GA_PRESETS, STUDIES
+
+    assert {"neat-1.2.1-dpv", "neat-1.2.1-dpnv"} <= set(GA_CHOICES) and dict(GA_PRESETS["neat-1.2.1-dpnv"]) == NEAT121_DPNV
+    for variant, preset in (("dpv", NEAT121_DPV), ("dpnv", NEAT121_DPNV)):
+        for kind in ("snn", "sigmoid"):
+            cfg = STUDIES[variant].config(kind, ga=f"neat-1.2.1-{variant}", coding="signed")
+            assert all(getattr(cfg, k) == v for k, v in preset.items()), (variant, kind)
+            assert cfg.num_inputs == {"dpv": 6, "dpnv": 3}[variant] and cfg.num_bias == (kind == "sigmoid")
+    with pytest.raises(KeyError):
+        GA_PRESETS["neat-1.2.2"]
