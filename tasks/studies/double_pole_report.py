@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import os
 import statistics
+import time
 from pathlib import Path
 
 from tasks.studies.double_pole import NEAT121_SCALES, PUBLISHED, study_spec, study_task
@@ -65,7 +66,9 @@ def study_rows(results: dict[str, ControllerRuns], variant: str, *, generalizati
         neat121 = neat121_evaluations(r)
         neat121_solved = [e for e in neat121 if e is not None]
         hidden, conns = r.champion_sizes()
+        start = time.process_time()
         tests = _champion_tests(r, variant, generalization)
+        report_tests_cpu_s = time.process_time() - start
         per_run[c] = {"seed": r.seeds, "solved_generation": r.solved_generation, "evaluations": evals,
                       "evaluations_neat121": ["" if e is None else e for e in neat121],
                       "best_fitness": r.best_fitness, "hidden_nodes": hidden, "enabled_connections": conns, **tests}
@@ -76,6 +79,8 @@ def study_rows(results: dict[str, ControllerRuns], variant: str, *, generalizati
                "evaluations_best": min(solved_evals) if solved_evals else math.nan,
                "evaluations_worst": max(solved_evals) if solved_evals else math.nan,
                "evaluations_mean_all": _mean(evals), "wall_s": r.wall_s, "ga": r.extra.get("ga", ""),
+               "cpu_s": r.extra.get("cpu_s", math.nan), "solve_test_cpu_s": r.extra.get("solve_test_cpu_s", math.nan),
+               "report_tests_cpu_s": report_tests_cpu_s,
                "evaluations_neat121_mean_solved": _mean(neat121_solved),
                "evaluations_neat121_median_solved": statistics.median(neat121_solved) if neat121_solved else math.nan}
         if r.extra.get("coding", "study") != "study":
@@ -158,11 +163,17 @@ def format_study_markdown(summary: dict, command: str) -> str:
               "| Controller | Hidden nodes | Connections | Generalisation as evolved | as a static map | "
               f"Hold the standard start {GENERALIZATION_STEPS} steps: as evolved | as a static map | Wall time (s) |",
               "|---|---|---|---|---|---|---|---|"]
+    cost = ["", "What the runs cost (CPU seconds, all runs of a controller):", "",
+            "| Controller | Evolution | of which the tests of a solution | The report's generalisation and ablation tests |",
+            "|---|---|---|---|"]
     for c, row in summary["rows"].items():
         lines.append(f"| {LABELS.get(c, c)} | {_pair(row, 'hidden_nodes', 2)} | {_pair(row, 'connections', 2)} | "
                      f"{_pair(row, 'generalization')} | {_pair(row, 'generalization_static_map')} | "
                      f"{row.get('holds_1000_steps', '-')}/{row['runs']} | "
                      f"{row.get('static_map_holds_1000_steps', '-')}/{row['runs']} | {row['wall_s']:.0f} |")
+        cost.append(f"| {LABELS.get(c, c)} | {_fmt(row.get('cpu_s', math.nan))} | "
+                    f"{_fmt(row.get('solve_test_cpu_s', math.nan))} | {_fmt(row.get('report_tests_cpu_s', math.nan))} |")
+    lines += cost
     lines += ["", f"Generalisation: the 625 start states of Gruau et al. (1996) that a run's champion balances for "
               f"{GENERALIZATION_STEPS} steps (mean). Memory ablation: the same champions run as a "
               f"static map (every control step from the network's initial state, settled {STATIC_MAP_STEPS} control "

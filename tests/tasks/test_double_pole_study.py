@@ -19,7 +19,7 @@ from tasks.studies.double_pole import (
     study_spec,
     study_task,
 )
-from tasks.studies.double_pole_report import study_rows, write_study_report
+from tasks.studies.double_pole_report import format_study_markdown, study_rows, write_study_report
 from tasks.studies.reproduce import ReproduceError, run_controller
 
 
@@ -188,6 +188,13 @@ def test_reproduce_dpnv_with_neat_121s_test_resumes_to_the_same_bits(tmp_path):
                              champion_test="species", resume=True)
     assert torch.equal(resumed.history, straight.history) and resumed.solved_generation == straight.solved_generation
     assert resumed.extra["champion_test"] == "species"
+    # the tests of a solution are part of the cost, kept across the interruption
+    assert 0 < saved["solve_test_cpu_s"] <= saved["cpu_s"]
+    assert saved["solve_test_cpu_s"] < resumed.extra["solve_test_cpu_s"] <= resumed.extra["cpu_s"]
+    rows = study_rows({"sigmoid": resumed}, "dpnv", generalization=False)["rows"]["sigmoid"]
+    assert rows["solve_test_cpu_s"] == resumed.extra["solve_test_cpu_s"] and rows["report_tests_cpu_s"] >= 0
+    assert "What the runs cost (CPU seconds" in format_study_markdown({**study_rows({"sigmoid": resumed}, "dpnv"),
+                                                                       "seeds": [0, 1]}, "test")
     with pytest.raises(ReproduceError, match="champion_test='species', this call asks for champion_test='champion'"):
         run_controller("dpnv", "sigmoid", [0, 1], 3, tmp_path / "split", progress=False, resume=True)
     with pytest.raises(ReproduceError, match="'species' only for dpnv"):
