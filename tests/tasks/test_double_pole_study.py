@@ -213,3 +213,15 @@ def test_neat_121_presets_reach_the_study_config_through_the_registry():
             assert cfg.num_inputs == {"dpv": 6, "dpnv": 3}[variant] and cfg.num_bias == (kind == "sigmoid")
     with pytest.raises(KeyError):
         GA_PRESETS["neat-1.2.2"]
+
+
+def test_the_neat121_ablation_runs_each_setting_and_compares_it_to_the_preset(capsys):
+    import json
+
+    from experiments.neat121_ablation import ABLATIONS
+    from experiments.neat121_ablation import main as ablation_main
+
+    ablation_main(["dpv", "--seeds", "300-301", "--generations", "2", "--only", "preset", "exclusive"])
+    lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [row["setting"] for row in lines] == [n for n in ABLATIONS if "preset" in n or "exclusive" in n]
+    assert lines[0]["solved"].endswith("/2") and lines[1]["p_vs_preset"] <= 1.0
