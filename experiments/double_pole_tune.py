@@ -30,6 +30,7 @@ from tasks.studies.double_pole import (
     study_spec,
     study_task,
 )
+from tasks.studies.generalization import generalization_starts
 
 
 def main() -> None:
@@ -43,19 +44,33 @@ def main() -> None:
     p.add_argument("--cfg", default="{}")
     p.add_argument("--spec", default="{}")
     p.add_argument("--bounds", default=None, help="JSON list of symmetric observation bounds")
+    p.add_argument("--coding", default="study", choices=("study", "signed"), help="the study's input coding")
+    p.add_argument("--episode-steps", type=int, default=None, help="DPNV: the damping fitness's episode (default 1000)")
+    p.add_argument("--starts", type=int, default=1,
+                   help="DPNV: the fitness's episodes: the standard start, then starts drawn from Gruau's 625 "
+                        "(the mean damping fitness over them)")
     p.add_argument("--test", default="champion", choices=("champion", "species"),
                    help="DPNV's test of a generation: the overall champion (NEAT 2002 as read here) or NEAT C++ "
                         "1.2.1's champion of the best species not tested since it improved")
     a = p.parse_args()
     torch.set_num_threads(1)
     velocities = a.task == "dpv"
-    task = study_task(a.task)
-    if a.bounds is not None:
+    task = study_task(a.task, a.coding)
+    if a.bounds is not None or a.episode_steps is not None:
         task = DoublePoleTask(velocities=velocities, fitness="steps" if velocities else "damping",
-                              max_steps=task.max_steps, observation_bounds=tuple(json.loads(a.bounds)))
-    cfg = study_config(a.task, a.kind, ga=a.ga, **({} if a.pop is None else {"pop_size": a.pop}), **json.loads(a.cfg))
-    spec = replace(study_spec(a.task, a.kind), **json.loads(a.spec))
-    fitness = TaskFitness(task, cfg, spec)
+                              max_steps=a.episode_steps or task.max_steps,
+                              observation_bounds=tuple(json.loads(a.bounds)) if a.bounds else task.observation_high)
+    cfg = study_config(a.task, a.kind, ga=a.ga, coding=a.coding, **({} if a.pop is None else {"pop_size": a.pop}),
+                       **json.loads(a.cfg))
+    spec = replace(study_spec(a.task, a.kind, a.coding), **json.loads(a.spec))
+    starts = None
+    if a.starts > 1:  # the standard start and Gruau's starts drawn from the grid (seed 0)
+        grid = generalization_starts()
+        grid = grid[grid.abs().sum(1) > 0]  # not the rest state: its damping term 0.75 / J divides by J = 0
+        chosen = grid[torch.randperm(len(grid), generator=torch.Generator().manual_seed(0))[: a.starts - 1]]
+        standard = task.reset(1)[:, :6]
+        starts = task.starts(torch.cat([standard, chosen]))
+    fitness = TaskFitness(task, cfg, spec, episodes=a.starts, starts=starts)
     neat = NEAT(cfg, seeds=list(range(5000, 5000 + a.seeds)))
     species_test = SpeciesChampionTest(neat, lambda champions: champions_pass(champions, cfg, spec, task=task))
     t0 = time.time()
