@@ -10,7 +10,7 @@ Parts:
   networks of 8 nodes whose plant never fails (failure limits lifted), one thread. A long
   episode of one row (``--long-steps`` control steps) against 9000 rows for 200 steps: microseconds
   per control step at batch 1 against per row-step in the batch, and their ratio, for NEAT-SNN and
-  sigmoid NEAT, natively (``evolution.episodes``) and through the Python loop (``native=False``).
+  sigmoid NEAT, natively (``evolution.kernels.episodes``) and through the Python loop (``native=False``).
 - ``table2``, ``table1``: ``snn-neat reproduce table2|table1 --runs 60`` with the default settings,
   as a user runs it: wall and CPU seconds (this process's children).
 - ``dpv``, ``dpnv``: ``snn-neat reproduce dpv|dpnv --runs N --no-generalization`` (seeds

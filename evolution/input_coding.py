@@ -18,7 +18,7 @@ spec picks the coding (``SpikingSpec.input_coding``, ``SigmoidSpec.input_coding`
   ON/OFF pair of sensory neurons codes a signed quantity with non-negative rates.
 
 The constants are computed once in the network's dtype (``coding_constants``), and the C loop
-(``evolution/csrc/episodes_impl.h``, ``lanes_observe_``) repeats these operations on them, so
+(``evolution/kernels/csrc/episodes_impl.h``, ``lanes_observe_``) repeats these operations on them, so
 both paths give the same bits.
 """
 

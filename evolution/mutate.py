@@ -4,7 +4,7 @@ Every function is pure: genomes in, new genomes out, random numbers from the per
 ``RunRNG``. ``active[R, P]`` marks the genomes that may mutate (elites are copied unchanged).
 Decisions compare float64 uniforms with the configured probabilities. Every block of draws
 covers every genome and slot, used or not, so a run's stream never depends on what happened
-elsewhere; ``evolution.breed_kernel`` computes the same step, evaluating only the draws a
+elsewhere; ``evolution.kernels.breed`` computes the same step, evaluating only the draws a
 genome uses (a draw is addressed by its counter).
 """
 

@@ -22,7 +22,6 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
-from evolution import breed_kernel
 from evolution.checkpoint import (
     CHECKPOINT_FORMAT,
     CHECKPOINT_VERSION,
@@ -31,6 +30,7 @@ from evolution.checkpoint import (
     load_checkpoint_dict,
 )
 from evolution.config import ConfigError, NEATConfig
+from evolution.kernels import breed as breed_kernel
 from evolution.population import Genomes, InvariantError, check_invariants, initial_genomes
 from evolution.reporters import BaseReporter, GenerationStatus
 from evolution.reproduce import ReproductionInfo, reproduce

@@ -537,7 +537,7 @@ class KernelConstants(NamedTuple):
 
 def kernel_constants(controller: SpikingController, dtype: torch.dtype) -> KernelConstants:
     """The controller's ``KernelConstants`` in ``dtype`` (contiguous): the control step's kernel
-    (``RateControlKernel``) and the episode loop (``evolution.episodes``) bind the same ones."""
+    (``RateControlKernel``) and the episode loop (``evolution.kernels.episodes``) bind the same ones."""
     net, spec = controller.network, controller.spec
     bernoulli = spec.encoder == "bernoulli"
     iconst = (controller._bias + net.i_background).to(dtype)

@@ -24,9 +24,10 @@ from dataclasses import dataclass, field
 import torch
 from torch import Tensor
 
-from evolution import breed_kernel, select_kernel
 from evolution.config import NEATConfig
 from evolution.crossover import crossover
+from evolution.kernels import breed as breed_kernel
+from evolution.kernels import select as select_kernel
 from evolution.mutate import (
     mutate_add_connection,
     mutate_add_node,
@@ -163,7 +164,7 @@ def share_scale(fitness: Tensor) -> Tensor:
     1, or where sums of ``P`` values and differences of two could overflow (``|f| > max / 4P``,
     about 3e305 at P = 150), the power of two ``2**-e`` with ``2**e > 4P``: a power of two scales
     exactly, so the quotas are those of unbounded exponents, and every smaller fitness is
-    shared bit for bit as before. (``evolution/csrc/select.c`` has the same ``share_scale``.)"""
+    shared bit for bit as before. (``evolution/kernels/csrc/select.c`` has the same ``share_scale``.)"""
     P = fitness.shape[1]
     e = math.frexp(4.0 * P)[1]
     top = fitness.to(torch.float64).abs().amax(1, keepdim=True)
@@ -192,7 +193,7 @@ def allocate_offspring(fitness: Tensor, species: Tensor, survivors: Tensor, pop_
     total = share.sum(1, keepdim=True)
     share = torch.where(total > 0, share, survivors.to(dt))
     # Summed in slot order (cumsum is sequential; sum's order depends on vector width), the
-    # order evolution.select_kernel.species_offspring sums in.
+    # order evolution.kernels.select.species_offspring sums in.
     total = share.cumsum(1)[:, -1:].clamp_min(1e-300)
     quota = pop_size * share / total
     base = quota.floor()
@@ -212,7 +213,7 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
     Returns ``(children, elite [R, P] bool, species state, info)``. Runs whose species all
     went extinct get ``info.extinct``; their children are meaningless and the caller resets
     them. ``fused``: stagnation, allocation, selection and breeding by the C kernels
-    (``evolution.select_kernel``, ``evolution.breed_kernel``, same result) or the tensor
+    (``evolution.kernels.select``, ``evolution.kernels.breed``, same result) or the tensor
     operators (``update_stagnation``, ``allocate_offspring``, ``select_parents`` and the
     operators); by default the kernels wherever they can run (CPU, compiler present).
     ``runs``: ``g`` is a larger population and the other arguments describe its runs ``runs``
@@ -309,7 +310,7 @@ def extra_draws(cfg: NEATConfig, rng: RunRNG, P: int) -> dict[str, Tensor]:
 
 def select_parents(fitness: Tensor, species: Tensor, survivors: Tensor, counts: Tensor, cfg: NEATConfig,
                    rng: RunRNG, champions: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-    """Parents of every child, as tensor operations (``evolution.select_kernel`` computes the
+    """Parents of every child, as tensor operations (``evolution.kernels.select`` computes the
     same in C). Returns ``(first, second, do_cross, elite)``, all ``[R, P]``: ``first`` is the
     fitter parent where ``do_cross``; elites are copied unchanged. ``champions[R]``: in those
     runs every child is a clone of its species' best member, the last one its elite ([NEATC]

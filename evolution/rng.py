@@ -8,7 +8,7 @@ history, do not depend on which or how many other runs share its batch.
 Each call to ``rand``/``randn`` takes the next block of counters: a block of shape
 ``[R, *shape]`` gives run ``r`` the counters ``offset[r] + arange(prod(shape))`` (``randn``
 takes two counters per draw), and the offset advances by the block's size. Because a draw
-is addressed by its counter, a fused kernel (``evolution.breed_kernel``) computes only the
+is addressed by its counter, a fused kernel (``evolution.kernels.breed``) computes only the
 draws it needs, the same numbers the tensor operators draw, without drawing the rest.
 
 - float64 uniforms: 53 bits, ``[0, 1)``; float32 uniforms: the top 24 bits, ``[0, 1)``.
@@ -16,7 +16,7 @@ draws it needs, the same numbers the tensor operators draw, without drawing the 
   float64 uniforms at counters ``2k`` and ``2k + 1`` of the block, rounded to the dtype.
   ``log`` and ``cos`` are our own (``box_muller``: exact range reduction, then series to
   about 1e-16) and ``sqrt`` too (Newton), built from IEEE-exact operations only
-  (``+ - * /``, exponent bits), so torch and the C kernels (``evolution/csrc/box_muller.h``) compute the
+  (``+ - * /``, exponent bits), so torch and the C kernels (``evolution/kernels/csrc/box_muller.h``) compute the
   same bits on any machine, and the C loops vectorise.
 
 Arithmetic is on int64 tensors, which wrap like uint64 for ``+``, ``*`` and ``^``; right

@@ -7,7 +7,7 @@ over the task's bounds), act (network state carried across control steps), step 
 frozen; when fewer than ``compact_below`` of the rows still in the batch are alive, the
 finished ones are dropped (plant and controller state), so they stop costing compute. No
 Python loop over genomes, episodes or neurons. Where the task has a native step and the
-controller a C kernel, whole episodes run in one native call instead (``evolution.episodes``,
+controller a C kernel, whole episodes run in one native call instead (``evolution.kernels.episodes``,
 the same bits), and the loop here (traces, other controllers) steps the plant natively.
 
 ``TaskFitness`` turns a task into NEAT's ``fitness_fn(genomes) -> [R, P]``: the mean over
@@ -29,9 +29,9 @@ import torch
 from torch import Tensor
 
 from evolution.config import NEATConfig
-from evolution.episodes import native_rollout
 from evolution.input_coding import code_observations, coding_constants, input_coding_of
-from evolution.native_plant import native_plant
+from evolution.kernels.episodes import native_rollout
+from evolution.kernels.native_plant import native_plant
 from evolution.phenotype import SigmoidSpec, SpikingSpec, as_spec, check_controller_config, make_controller
 from evolution.population import Genomes
 from evolution.task import Controller, Task, TaskError
@@ -167,7 +167,7 @@ def rollout(task: Task, controller: Controller, *, episodes: int = 1, seed: int 
         max_steps: episode length (default ``task.max_steps``).
         record: keep a trace of every control step (no compaction; for plots).
         compact_below: drop finished rows when fewer than this fraction of the batch is alive.
-        native: run whole episodes natively where possible (``evolution.episodes``; False: this
+        native: run whole episodes natively where possible (``evolution.kernels.episodes``; False: this
             Python loop, e.g. to compare: the results are the same bits).
 
     Returns:

@@ -14,9 +14,10 @@ from dataclasses import dataclass, fields
 import torch
 from torch import Tensor
 
-from evolution import breed_kernel, select_kernel
 from evolution.config import NEATConfig
 from evolution.distance import distance, gene_stats
+from evolution.kernels import breed as breed_kernel
+from evolution.kernels import select as select_kernel
 from evolution.population import Genomes, run_index
 from evolution.rng import RunRNG
 
@@ -137,8 +138,8 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
              genes: breed_kernel.GeneBits | None = None) -> tuple[Tensor, SpeciesState]:
     """Assign every genome a species slot; returns ``(species [R, P] long, new state)``.
 
-    ``fused``: assign by the C kernels (``evolution.breed_kernel.assign_species``, the same
-    rule, distances agreeing to about 1e-15; ``evolution.select_kernel`` for the
+    ``fused``: assign by the C kernels (``evolution.kernels.breed.assign_species``, the same
+    rule, distances agreeing to about 1e-15; ``evolution.kernels.select`` for the
     representatives) or by the tensor reference below; by default the kernels wherever they
     can run. ``runs``: the genomes are those runs of ``g`` (a larger population; the kernels
     read them in place) and ``sp`` describes those runs. ``genes``: the genomes' gene bitsets

@@ -25,7 +25,7 @@ Bad output from a task (a wrong shape, NaN or inf) is caught at the seam and rai
 
 Optionally, ``native``: a ``NativeStep`` naming a C source that defines the same step and
 observation natively (the ABI: ``snn_torch/kernels/csrc/native_plant.h``). With it, and a controller
-with a C kernel, the rollout runs whole episodes in one native call (``evolution.episodes``);
+with a C kernel, the rollout runs whole episodes in one native call (``evolution.kernels.episodes``);
 the torch methods stay the definition (the native step is checked against them, bit for bit,
 when it is bound) and the path on other devices, with no compiler, or when tracing.
 
@@ -179,7 +179,7 @@ class Task(ABC):
                 torch.tensor(list(self.observation_high), dtype=dtype, device=device))
 
     def __getstate__(self) -> dict:
-        # the bound native plant (ctypes functions, evolution.native_plant) is rebuilt where unpickled
+        # the bound native plant (ctypes functions, evolution.kernels.native_plant) is rebuilt where unpickled
         return {k: v for k, v in self.__dict__.items() if k != "_native_plants"}
 
     def __repr__(self) -> str:

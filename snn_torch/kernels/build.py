@@ -1,6 +1,6 @@
 """Build the package's C kernels once per machine with the system compiler; load them with ``ctypes``.
 
-Kernels are ``.c``/``.h`` files shipped as package data (``snn_torch/kernels/csrc``, ``evolution/csrc``).
+Kernels are ``.c``/``.h`` files shipped as package data (``snn_torch/kernels/csrc``, ``evolution/kernels/csrc``).
 Each library's exported functions are declared once, in its header: ``load_library`` reads the
 prototypes there and sets every function's ``ctypes`` signature from them, and the ``.c`` file
 includes the header, so the compiler checks that the definitions match. A header function

@@ -13,9 +13,9 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
-from evolution import breed_kernel
-from evolution.breed_kernel import GeneBits, _coefficients, _genes_args, _sfx
 from evolution.config import NEATConfig
+from evolution.kernels import breed as breed_kernel
+from evolution.kernels.breed import GeneBits, _coefficients, _genes_args, _sfx
 from snn_torch.kernels.build import KernelLibrary, load_library
 
 __all__ = ["library", "gene_distances"]

@@ -10,8 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from evolution import breed_kernel, select_kernel
 from evolution.distance import distance, gene_stats
+from evolution.kernels import breed as breed_kernel
+from evolution.kernels import select as select_kernel
 from evolution.neat import NEAT
 from evolution.reproduce import (
     _rep_nodes,

@@ -3,7 +3,7 @@
 import pytest
 import torch
 
-from evolution import select_kernel
+from evolution.kernels import select as select_kernel
 from evolution.neat import NEAT
 from evolution.population import check_invariants
 from evolution.reproduce import allocate_offspring

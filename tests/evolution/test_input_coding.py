@@ -16,8 +16,8 @@ from evolution import (
     rollout,
     task_config,
 )
-from evolution.episodes import native_rollout
 from evolution.input_coding import code_observations, coding_constants
+from evolution.kernels.episodes import native_rollout
 from tasks.cartpole import CartPoleTask
 from tasks.pendulum import PendulumTask
 

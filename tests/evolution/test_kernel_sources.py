@@ -7,11 +7,13 @@ from pathlib import Path
 
 import pytest
 
-from evolution import breed_kernel, rng, select_kernel
+from evolution import rng
+from evolution.kernels import breed as breed_kernel
+from evolution.kernels import select as select_kernel
 from snn_torch.kernels.build import parse_prototypes
 from tests.evolution import kernel_entry_points as kernel_tests
 
-CSRC = Path(rng.__file__).resolve().parent / "csrc"
+CSRC = Path(breed_kernel.__file__).resolve().parent / "csrc"
 
 
 def _c_array(text: str, name: str) -> list[float]:

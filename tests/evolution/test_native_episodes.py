@@ -1,4 +1,4 @@
-"""Whole episodes in one native call (evolution.episodes): the torch rollout's bits, or a clear error."""
+"""Whole episodes in one native call (evolution.kernels.episodes): the torch rollout's bits, or a clear error."""
 
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ import pytest
 import torch
 
 from evolution import NEAT, Task, TaskError, episode_starts, fresh_starts, make_controller, rollout
-from evolution.episodes import native_episodes_available, native_rollout
-from evolution.native_plant import native_plant
+from evolution.kernels.episodes import native_episodes_available, native_rollout
+from evolution.kernels.native_plant import native_plant
 from evolution.phenotype import SigmoidSpec, SpikingSpec
 from evolution.population import Genomes
 from evolution.task import NativeStep

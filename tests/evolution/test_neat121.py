@@ -8,10 +8,11 @@ from pathlib import Path
 import pytest
 import torch
 
-from evolution import breed_kernel, select_kernel
 from evolution.checkpoint import CheckpointError
 from evolution.config import ConfigError, NEATConfig
 from evolution.crossover import crossover
+from evolution.kernels import breed as breed_kernel
+from evolution.kernels import select as select_kernel
 from evolution.mutate import (
     mutate_add_connection,
     mutate_add_node,

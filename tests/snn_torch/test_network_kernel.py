@@ -196,7 +196,7 @@ def test_sigmoid_kernel_equals_the_torch_updates_bit_for_bit(dtype, N, clamped, 
 @pytest.mark.skipif(shutil.which("nm") is None, reason="no nm to list a library's symbols")
 @pytest.mark.parametrize("stem", ["recurrent_izhikevich", "recurrent_sigmoid", "episodes"])
 def test_kernel_libraries_export_exactly_what_their_headers_declare(stem):
-    from evolution import episodes
+    from evolution.kernels import episodes
     from snn_torch.kernels import network as network_kernel
     from snn_torch.kernels import sigmoid as sigmoid_kernel
     from snn_torch.kernels.build import parse_prototypes

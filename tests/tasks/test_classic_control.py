@@ -23,8 +23,8 @@ import pytest
 import torch
 
 from evolution import SigmoidSpec, SpikingSpec, make_controller, random_genomes, rollout, task_config
-from evolution.episodes import native_rollout
-from evolution.native_plant import native_plant
+from evolution.kernels.episodes import native_rollout
+from evolution.kernels.native_plant import native_plant
 from evolution.task import TaskError
 from snn_torch.functional.portable_math import sin_cos
 from tasks.acrobot import AcrobotTask

@@ -128,7 +128,7 @@ def test_the_native_step_is_the_torch_step_bit_for_bit(velocities):
     """The native step (tasks/csrc/double_pole.c) against the torch definition, step by step from
     all 625 generalisation starts under the LQR law with noise (a few start states fail, most
     balance 600 steps): the same bits (sin and cos from portable_math, sums in slot order)."""
-    from evolution.native_plant import native_plant
+    from evolution.kernels.native_plant import native_plant
     from tasks.studies.generalization import generalization_starts
 
     task = DoublePoleTask(velocities=velocities, fitness="steps" if velocities else "damping", max_steps=600)

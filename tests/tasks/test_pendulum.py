@@ -7,8 +7,8 @@ import pytest
 import torch
 
 from evolution import SigmoidSpec, SpikingSpec, make_controller, random_genomes, rollout, task_config
-from evolution.episodes import native_rollout
-from evolution.native_plant import native_plant
+from evolution.kernels.episodes import native_rollout
+from evolution.kernels.native_plant import native_plant
 from tasks.pendulum import PendulumTask, angle_normalize
 
 gym = pytest.importorskip("gymnasium")

@@ -1,5 +1,5 @@
 /* The native plant ABI of the task seam (evolution.task.NativeStep): what a task's C source
-   defines so that whole episodes run in one native call (evolution/csrc/episodes.c). For a
+   defines so that whole episodes run in one native call (evolution/kernels/csrc/episodes.c). For a
    prefix P and each state dtype the task declares (T = float: suffix f32; double: f64):
 
      int  P_step_f32(const float *state, const double *action, float *next, double *reward,

@@ -8,7 +8,7 @@
 #include "portable_math.h"
 
 /* `updates` updates of one network's values y[0..n) in place (inputs x, weights W), scratch yc
-   and acc of n each: also what evolution/csrc/episodes.c runs per row. */
+   and acc of n each: also what evolution/kernels/csrc/episodes.c runs per row. */
 #define DEFINE_UPDATE(NAME, T)                                                                 \
 static inline void NAME##_row(T *y, const T *x, const T *W, int64_t n, int64_t n_in, int64_t n_bias, \
                               T slope, int64_t updates, T *yc, double *acc) {                  \

@@ -24,7 +24,7 @@ unused ones changes nothing, and the result is the same with any thread count.
 - ``touched_nodes``: the node slots the living representatives use, from their bitsets
   (the node registry's reserved slots).
 
-The C is ``evolution/csrc/breed.c`` (exports declared in ``breed.h``; the draws in
+The C is ``evolution/kernels/csrc/breed.c`` (exports declared in ``breed.h``; the draws in
 ``counter_rng.h`` and ``box_muller.h``, the distance in ``gene_distance.h``), built once per
 machine by ``snn_torch.kernels.build``; ``SNN_NEAT_C_KERNELS=0`` disables the kernels.
 """
@@ -37,8 +37,8 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
-from evolution import select_kernel
 from evolution.config import NEATConfig
+from evolution.kernels import select as select_kernel
 from evolution.neat121 import CLONE_LINK_PROB
 from evolution.population import Genomes
 from evolution.rng import RunRNG
@@ -110,7 +110,7 @@ def usable_for(g: Genomes) -> bool:
 
 
 def wanted(g: Genomes, fused: bool | None) -> bool:
-    """Whether a step on ``g`` runs on the C kernels (these and ``evolution.select_kernel``):
+    """Whether a step on ``g`` runs on the C kernels (these and ``evolution.kernels.select``):
     ``fused`` when given, else wherever they can run."""
     return (usable_for(g) and select_kernel.kernel_available()) if fused is None else fused
 

@@ -1,5 +1,5 @@
 /* Parent selection, species representatives and offspring allocation (see select.h;
-   evolution.select_kernel documents them), a run at a time, with the reference's draws and
+   evolution.kernels.select documents them), a run at a time, with the reference's draws and
    arithmetic, so the results are the same bit for bit. */
 #include "select.h"
 

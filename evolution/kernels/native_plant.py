@@ -11,7 +11,7 @@ results; one that returns NaN or inf is caught where it is used, as the torch st
 
 A bound plant steps a torch batch (``step``, ``observe``: what the rollout's Python loop calls
 on the CPU in place of the torch methods) and hands its function pointers to the episode loop
-(``evolution.episodes``).
+(``evolution.kernels.episodes``).
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ episode pay Python's and torch's per-op overhead on every step (hundreds of micr
 one row). Where the task has a native step (``Task.native``) and the controller a C kernel (a
 ``SpikingController`` or ``SigmoidController`` on the CPU, or either as ``StaticMapController``'s memoryless map),
 ``native_rollout`` runs every row's
-whole episode in C instead (``evolution/csrc/episodes.c``): observe, normalise, act, step,
+whole episode in C instead (``evolution/kernels/csrc/episodes.c``): observe, normalise, act, step,
 accumulate, stop, take the next row; spread over ``torch.get_num_threads()`` threads, each of
 which takes the next row as soon as one of its rows finishes (no thread waits for another
 until the last row is done, so a busy core delays only its own rows).
@@ -28,7 +28,7 @@ from torch import Tensor
 
 from evolution.ablation import StaticMapController
 from evolution.input_coding import CODING_CODES, coding_constants, input_coding_of
-from evolution.native_plant import native_plant
+from evolution.kernels.native_plant import native_plant
 from evolution.phenotype import DECODER_CODES, SigmoidController, SpikingController, kernel_constants
 from evolution.task import Task, TaskError
 from snn_torch.kernels.build import library_loader

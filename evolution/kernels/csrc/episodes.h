@@ -1,4 +1,4 @@
-/* Whole episodes in one native call (evolution.episodes): a controller's C kernel and a task's
+/* Whole episodes in one native call (evolution.kernels.episodes): a controller's C kernel and a task's
    native plant step (snn_torch/kernels/csrc/native_plant.h) in one loop, every control step,
    termination, returns and the dropping of finished rows in C. Every function here is exported;
    snn_torch.kernels.build reads these prototypes to declare the ctypes signatures.

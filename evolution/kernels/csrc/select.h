@@ -1,4 +1,4 @@
-/* Parent selection and species representatives as C kernels, for evolution.select_kernel
+/* Parent selection and species representatives as C kernels, for evolution.kernels.select
    (which documents the arguments). Every function here is exported; snn_torch.kernels.build sets the
    ctypes signatures from these prototypes, and select.c includes this header. */
 #ifndef SNN_NEAT_SELECT_H

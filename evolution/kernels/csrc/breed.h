@@ -1,4 +1,4 @@
-/* The breeding step and speciation as C kernels, for evolution.breed_kernel (which documents
+/* The breeding step and speciation as C kernels, for evolution.kernels.breed (which documents
    the arguments). Every function here is exported; snn_torch.kernels.build sets the ctypes signatures
    from these prototypes, and breed.c includes this header, so the compiler checks them. */
 #ifndef SNN_NEAT_BREED_H

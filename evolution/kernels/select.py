@@ -17,7 +17,7 @@ a time (threads share out the runs), with the same draws (addressed by counter,
   member on an exact tie, as the reference's scatter), its genes copied as whole rows; slots
   without members emptied.
 
-The C is ``evolution/csrc/select.c`` (exports declared in ``select.h``), built once per machine
+The C is ``evolution/kernels/csrc/select.c`` (exports declared in ``select.h``), built once per machine
 by ``snn_torch.kernels.build``.
 """
 

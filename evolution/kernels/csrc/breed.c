@@ -1,4 +1,4 @@
-/* The breeding step and speciation (see breed.h; evolution.breed_kernel documents them).
+/* The breeding step and speciation (see breed.h; evolution.kernels.breed documents them).
 
    A run at a time (threads share out the runs) and a child at a time within it, touching only
    the child's genes and evaluating only the draws it uses: a draw is addressed by its counter
@@ -16,7 +16,7 @@
 #include "counter_rng.h"
 #include "gene_distance.h"
 
-/* The draw blocks of a step, in evolution.breed_kernel._BLOCKS's order. */
+/* The draw blocks of a step, in evolution.kernels.breed._BLOCKS's order. */
 enum { B_FROM_OTHER, B_STAYS, B_SIGMA_PICK, B_NODE_WANT, B_NODE_PICK, B_CONN_WANT, B_CONN_PICK, B_CONN_INIT,
        B_W_GENOME, B_W_U, B_W_NOISE, B_S_WANT, B_S_NOISE, B_TOGGLE,
        B_ONE_WANT, B_ONE_PICK, B_REENABLE, /* only when toggle_one: breed_kernel._TOGGLE_ONE_BLOCKS */
