@@ -51,7 +51,8 @@ def run_setting(variant: str, controller: str, seeds: list[int], generations: in
     neat = NEAT(config, seeds=seeds)
     start = time.process_time()
     neat.run(study.fitness(controller, config, coding), generations,
-             solved_fn=study.solved(controller, config, coding, champion_test=study.champion_tests[-1], neat=neat))
+             solved_fn=study.solved(controller, config, coding, champion_test="species" if variant == "dpnv" else None,
+                                       neat=neat))
     P = config.pop_size
     evals = [P * (g - 1) + q + 1 if g > 0 else None
              for g, q in zip(neat.solved_generation.tolist(), neat.solved_position.tolist(), strict=True)]

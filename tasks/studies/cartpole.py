@@ -173,6 +173,7 @@ def study_fitness(table: str, controller: str, config: NEATConfig, coding: str =
     return paper_fitness(table, controller, config, coding=coding)
 
 
-def study_solved(table: str, controller: str, config: NEATConfig, coding: str = "study") -> None:
+def study_solved(table: str, controller: str, config: NEATConfig, coding: str = "study", *,
+                 champion_test: str = "champion", neat=None) -> None:
     """None: the config's fitness threshold (the table's episode length) decides."""
     return None

@@ -395,9 +395,10 @@ def build_parser() -> argparse.ArgumentParser:
                           "study's: [0, 1] over the bounds) or 'signed' (double pole: NEAT C++ 1.2.1's x/4.8, x_dot/2, "
                           "theta/0.52, theta_dot/2, centred and unclipped; tables: [-1, 1] over the paper's bounds, "
                           "push-pull pairs for Bernoulli inputs; a sensitivity study)")
-    rep.add_argument("--champion-test", choices=CHAMPION_TESTS, default=CHAMPION_TESTS[0],
-                     help="dpnv only: the test of a generation: each run's overall champion (default), or NEAT C++ "
-                          "1.2.1's champion of the best species not tested since it last improved")
+    rep.add_argument("--champion-test", choices=CHAMPION_TESTS, default=None,
+                     help="dpnv only: the test of a generation: NEAT C++ 1.2.1's champion of the best species not "
+                          "tested since it last improved ('species', the default), or each run's overall champion, "
+                          "every generation ('champion', the default before 2026-12-03)")
     rep.add_argument("--out", default=None, help="output folder (default: results/TABLE)")
     rep.add_argument("--resume", action="store_true", help="continue from the checkpoints in --out")
     rep.add_argument("--checkpoint-every", type=_positive_int, default=1, help="generations between checkpoints")

@@ -156,7 +156,7 @@ def shard_layout(out: str | os.PathLike, controller: str, seeds: Sequence[int], 
 
 def _run_shard(task_name: str, shard: Shard, generations: int, self_loops: bool, checkpoint_every: int,
                device: str, threads: int | None, ga: str = "tuned", coding: str = "study",
-               champion_test: str = "champion") -> ControllerRuns:
+               champion_test: str | None = None) -> ControllerRuns:
     """Run (or continue) one shard; what a Ray task runs, and what the local path runs."""
     if threads is not None:
         torch.set_num_threads(threads)
@@ -180,7 +180,7 @@ def run_controller_sharded(task_name: str, controller: str, seeds: list[int], ge
                            out: str | os.PathLike, *, resume: bool = False, shards: int | None = None,
                            self_loops: bool = False, ga: str = "tuned", checkpoint_every: int = 1,
                            device: str | torch.device = "cpu", progress: bool = True,
-                           coding: str = "study", champion_test: str = "champion") -> ControllerRuns:
+                           coding: str = "study", champion_test: str | None = None) -> ControllerRuns:
     """Like :func:`run_controller`, but shard by shard in this process, following the
     manifest in ``OUT/shards`` (how ``--resume`` without ``--ray`` completes a Ray run)."""
     layout = shard_layout(out, controller, seeds, shards, resume=resume)
@@ -268,7 +268,7 @@ def run_controllers_on_ray(task_name: str, controllers: Sequence[str], seeds: li
                            resume: bool = False, self_loops: bool = False, ga: str = "tuned", checkpoint_every: int = 1,
                            device: str = "cpu", progress: bool = True, max_retries: int = 3,
                            cpus_per_shard: int = 1, coding: str = "study",
-                           champion_test: str = "champion") -> dict[str, ControllerRuns]:
+                           champion_test: str | None = None) -> dict[str, ControllerRuns]:
     """Evolve ``seeds`` of every controller as Ray tasks on the cluster at ``address``
     (``"auto"`` or ``"HOST:PORT"``), one task per shard, all controllers' shards in flight
     together; returns each controller's merged results, equal to :func:`run_controller`'s.

@@ -234,18 +234,22 @@ def species_champion_test(variant: str, controller: str, config: NEATConfig, nea
                                                                       min_general=GENERALIZATION_PASS, task=task))
 
 
-def study_solved(variant: str, controller: str, config: NEATConfig,
-                 coding: str = "study", *, neat=None) -> Callable[[Genomes, Tensor], Tensor] | None:
+def study_solved(variant: str, controller: str, config: NEATConfig, coding: str = "study", *,
+                 champion_test: str = "champion", neat=None) -> Callable[[Genomes, Tensor], Tensor] | None:
     """NEAT 2002's test of a generation as a ``solved_fn(genomes, fitness) -> [R, P]``, or None
-    where the fitness threshold decides (DPV: a genome balanced the whole 100,000 steps). DPNV:
-    the overall champion of each generation, or with ``neat`` NEAT C++ 1.2.1's choice of the
-    champion to test (``species_champion_test``)."""
+    where the fitness threshold decides (DPV: a genome balanced the whole 100,000 steps). DPNV,
+    ``champion_test="champion"``: the overall champion of each generation; ``"species"``: NEAT
+    C++ 1.2.1's choice of the champion to test, for ``neat``'s runs (``species_champion_test``)."""
     _check(variant, controller, coding)
     if variant == "dpv":
         return None
     task, spec = study_task(variant, coding), study_spec(variant, controller, coding)
-    if neat is not None:
+    if champion_test == "species":
+        if neat is None:
+            raise ValueError("the species champion test needs the NEAT whose runs it tests (neat=)")
         return species_champion_test(variant, controller, config, neat, coding)
+    if champion_test != "champion":
+        raise ValueError(f"champion_test must be 'champion' or 'species', got {champion_test!r}")
 
     def solved(genomes: Genomes, fitness: Tensor) -> Tensor:
         return champion_solves(genomes, fitness, config, spec, min_general=GENERALIZATION_PASS, task=task)

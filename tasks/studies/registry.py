@@ -121,7 +121,7 @@ class Study:
             raise ReproduceError(f"coding must be one of {self.codings} for {self.name}, got {coding!r}")
         if champion_test is not None and champion_test not in self.champion_tests:
             offered = {t: [s.name for s in STUDIES.values() if t in s.champion_tests]
-                       for s in STUDIES.values() for t in s.champion_tests[1:]}
+                       for s in STUDIES.values() for t in s.champion_tests if t != "champion"}
             only = "".join(f" ({t!r} only for {', '.join(names)})" for t, names in offered.items())
             raise ReproduceError(f"champion_test must be one of {self.champion_tests}{only}, got {champion_test!r} "
                                  f"for {self.name}")
@@ -163,11 +163,12 @@ class Study:
     def solved(self, controller: str, config, coding: str = "study", *, champion_test: str | None = None,
                neat=None):
         """``solved_fn(genomes, fitness) -> [R, P]`` bool, or None where the config's fitness threshold
-        decides. ``champion_test`` other than the default needs the ``neat`` whose runs it tests."""
+        decides. ``champion_test``: one the study offers (default: its first); a test that keeps
+        a record per run (DPNV's ``"species"``) needs the ``neat`` whose runs it tests."""
         champion_test = self.champion_tests[0] if champion_test is None else champion_test
         self._check(controller, coding, champion_test)
-        extra = {} if champion_test == self.champion_tests[0] else {"neat": neat}
-        return self._impl().study_solved(self.name, controller, config, coding, **extra)
+        return self._impl().study_solved(self.name, controller, config, coding, champion_test=champion_test,
+                                         neat=neat)
 
     def write_report(self, results: dict, out, *, command: str, generalization: bool = True) -> list:
         """Write the study's report of ``results`` (controller -> ``ControllerRuns``) to ``out``."""
@@ -201,11 +202,14 @@ STUDIES: Mapping[str, Study] = MappingProxyType({s.name: s for s in (
     Study("dpv", "double-pole balancing with velocities (NEAT 2002): six inputs, +-10 N, population 150, "
           "solved when a genome balances 100,000 steps", "tasks.studies.double_pole",
           {"sigmoid": _NEAT_PYTHON_01, "snn": _NEAT_PYTHON_01}, _DOUBLE_POLE_REPORT),
+    # DPNV's test of a generation: NEAT C++ 1.2.1's ("species": the champion of the best species not
+    # tested since it improved), or each generation's overall champion ("champion", the default
+    # before 2026-12-03, which retests the same genome while it stays the best)
     Study("dpnv", "double-pole balancing without velocities (NEAT 2002): x and both angles, Gruau's damping "
           "fitness over 1000 steps, population 1000, solved when a champion balances 100,000 steps and 200 of "
           "the 625 generalisation starts", "tasks.studies.double_pole",
           {"sigmoid": _NEAT_PYTHON_01, "snn": _NEAT_PYTHON_01}, _DOUBLE_POLE_REPORT,
-          champion_tests=("champion", "species")),
+          champion_tests=("species", "champion")),
 )})
 
 

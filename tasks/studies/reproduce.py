@@ -102,7 +102,7 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
                    *, resume: bool = False, self_loops: bool = False, ga: str = "tuned", checkpoint_every: int = 1,
                    device: str | torch.device = "cpu", progress: bool = True,
                    stop_after: int | None = None, coding: str = "study",
-                   champion_test: str = "champion") -> ControllerRuns:
+                   champion_test: str | None = None) -> ControllerRuns:
     """Evolve ``controller`` on the study ``task_name`` (``STUDIES``) for each seed (one batch),
     checkpointing to ``out``.
 
@@ -111,12 +111,14 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
     error, so a finished reproduction is never overwritten by accident. ``ga``: a GA preset of
     ``tasks.studies.registry.GA_PRESETS``, or ``"tuned"`` (default), the controller's own
     pick for the study. ``coding``: the study's input coding (``"study"``, or ``"signed"``).
-    ``champion_test``: the test of a generation the study offers (DPNV: ``"champion"``, each
-    run's overall champion every generation, or ``"species"``, NEAT C++ 1.2.1's champion of the
-    best species not tested since it improved; its record is kept in the checkpoint).
+    ``champion_test``: the test of a generation the study offers (default: its first; DPNV:
+    ``"species"``, NEAT C++ 1.2.1's champion of the best species not tested since it improved,
+    its record kept in the checkpoint, or ``"champion"``, each run's overall champion every
+    generation).
     ``stop_after`` (generations in this call) exists for tests of interruption.
     """
     s = study(task_name)
+    champion_test = s.champion_tests[0] if champion_test is None else champion_test
     s._check(controller, coding, champion_test)
     preset, ga_extra = s.ga_choice(controller, ga)
     if checkpoint_every < 1:

@@ -196,7 +196,11 @@ def test_reproduce_dpnv_with_neat_121s_test_resumes_to_the_same_bits(tmp_path):
     assert "What the runs cost (CPU seconds" in format_study_markdown({**study_rows({"sigmoid": resumed}, "dpnv"),
                                                                        "seeds": [0, 1]}, "test")
     with pytest.raises(ReproduceError, match="champion_test='species', this call asks for champion_test='champion'"):
-        run_controller("dpnv", "sigmoid", [0, 1], 3, tmp_path / "split", progress=False, resume=True)
+        run_controller("dpnv", "sigmoid", [0, 1], 3, tmp_path / "split", progress=False, resume=True,
+                       champion_test="champion")
+    # the species test is DPNV's default: a call that names none resumes it
+    default = run_controller("dpnv", "sigmoid", [0, 1], 3, tmp_path / "split", progress=False, resume=True)
+    assert default.extra["champion_test"] == "species" and default.solved_generation == straight.solved_generation
     with pytest.raises(ReproduceError, match="'species' only for dpnv"):
         run_controller("dpv", "sigmoid", [0], 1, tmp_path / "dpv", progress=False, champion_test="species")
 
