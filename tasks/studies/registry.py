@@ -114,21 +114,25 @@ class Study:
             self._cache["module"] = importlib.import_module(self.module)
         return self._cache["module"]
 
-    def _check(self, controller: str, coding: str = "study", champion_test: str | None = None) -> None:
+    def check(self, controller: str, coding: str = "study", champion_test: str | None = None) -> str:
+        """``ReproduceError`` naming the option the study does not offer; returns the champion test
+        (``champion_test``, or the study's default: its first)."""
+        champion_test = self.champion_tests[0] if champion_test is None else champion_test
         if controller not in CONTROLLERS:
             raise ReproduceError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
         if coding not in self.codings:
             raise ReproduceError(f"coding must be one of {self.codings} for {self.name}, got {coding!r}")
-        if champion_test is not None and champion_test not in self.champion_tests:
+        if champion_test not in self.champion_tests:
             offered = {t: [s.name for s in STUDIES.values() if t in s.champion_tests]
                        for s in STUDIES.values() for t in s.champion_tests if t != "champion"}
             only = "".join(f" ({t!r} only for {', '.join(names)})" for t, names in offered.items())
             raise ReproduceError(f"champion_test must be one of {self.champion_tests}{only}, got {champion_test!r} "
                                  f"for {self.name}")
+        return champion_test
 
     def ga_choice(self, controller: str, ga: str = "tuned") -> tuple[str, dict]:
         """``(preset, extra overrides)`` for ``ga``: a preset as it is, or ``"tuned"``: the controller's pick."""
-        self._check(controller)
+        self.check(controller)
         if ga == "tuned":
             preset, extra = self.tuned_ga[controller]
             return preset, dict(extra)
@@ -144,20 +148,20 @@ class Study:
 
     def spec(self, controller: str, coding: str = "study"):
         """The controller's spec (``SpikingSpec`` or ``SigmoidSpec``) under ``coding``."""
-        self._check(controller, coding)
+        self.check(controller, coding)
         return self._impl().study_spec(self.name, controller, coding)
 
     def config(self, controller: str, *, self_loops: bool = False, ga: str = "tuned", coding: str = "study",
                **overrides):
         """The ``NEATConfig`` ``controller`` evolves with (the CLI's memory check reads it too)."""
-        self._check(controller, coding)
+        self.check(controller, coding)
         preset, extra = self.ga_choice(controller, ga)
         return self._impl().study_config(self.name, controller, self_loops=self_loops, ga=preset, coding=coding,
                                          **{**extra, **overrides})
 
     def fitness(self, controller: str, config, coding: str = "study"):
         """``fitness_fn(genomes) -> [R, P]``."""
-        self._check(controller, coding)
+        self.check(controller, coding)
         return self._impl().study_fitness(self.name, controller, config, coding)
 
     def solved(self, controller: str, config, coding: str = "study", *, champion_test: str | None = None,
@@ -165,8 +169,7 @@ class Study:
         """``solved_fn(genomes, fitness) -> [R, P]`` bool, or None where the config's fitness threshold
         decides. ``champion_test``: one the study offers (default: its first); a test that keeps
         a record per run (DPNV's ``"species"``) needs the ``neat`` whose runs it tests."""
-        champion_test = self.champion_tests[0] if champion_test is None else champion_test
-        self._check(controller, coding, champion_test)
+        champion_test = self.check(controller, coding, champion_test)
         return self._impl().study_solved(self.name, controller, config, coding, champion_test=champion_test,
                                          neat=neat)
 

@@ -118,8 +118,7 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
     ``stop_after`` (generations in this call) exists for tests of interruption.
     """
     s = study(task_name)
-    champion_test = s.champion_tests[0] if champion_test is None else champion_test
-    s._check(controller, coding, champion_test)
+    champion_test = s.check(controller, coding, champion_test)
     preset, ga_extra = s.ga_choice(controller, ga)
     if checkpoint_every < 1:
         raise ReproduceError(f"checkpoint_every must be >= 1, got {checkpoint_every}")
