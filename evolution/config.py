@@ -52,6 +52,10 @@ class NEATConfig:
     # [Qiu19] start: each input wired to each output, nothing else. neat-python's "full"
     # start for recurrent nets also adds output self-loops: ``initial_self_loops=True``.
     initial_self_loops: bool = False
+    # Hidden nodes of the start genome (neat-python's ``num_hidden``): slots
+    # ``[first_hidden, first_hidden + initial_hidden)``, each fed by every input and bias and
+    # feeding every output, beside the direct input-output genes. 0 ([Qiu19], [NEAT02]): none.
+    initial_hidden: int = field(default=0, metadata=_range(0, None, integer=True))
     # Feed-forward only (no cycles): [NEAT02]'s XOR. Spiking controllers are recurrent.
     feed_forward: bool = False
 
@@ -184,6 +188,9 @@ class NEATConfig:
             raise ConfigError(
                 f"NEATConfig.weight_min_value ({self.weight_min_value}) must be below weight_max_value "
                 f"({self.weight_max_value})")
+        if self.initial_hidden > self.max_hidden:
+            raise ConfigError(f"NEATConfig.initial_hidden ({self.initial_hidden}) must not exceed max_hidden "
+                              f"({self.max_hidden})")
         if self.weight_mutate_neatc and self.weight_mutate_per_gene:
             raise ConfigError("NEATConfig.weight_mutate_neatc and weight_mutate_per_gene are two rules for the "
                               "same mutation: set at most one")
@@ -226,8 +233,9 @@ class NEATConfig:
             for key, raw in parser.items(section):
                 key = INI_ALIASES.get(key, key)
                 if key == "num_hidden" and raw.strip() not in ("0", ""):
-                    raise ConfigError(f"{os.fspath(path)}: [{section}] num_hidden must be 0: genomes "
-                                      "start from inputs wired to outputs")
+                    raise ConfigError(f"{os.fspath(path)}: [{section}] num_hidden must be 0: its start "
+                                      "depends on initial_connection, which is not read; pass "
+                                      "initial_hidden=... (a full_direct start) as an override instead")
                 if key in IGNORED_INI_KEYS:
                     continue
                 if key not in known:

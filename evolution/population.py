@@ -138,19 +138,27 @@ def initial_genomes(config: NEATConfig, rng: RunRNG, *, dtype: torch.dtype = tor
     """The start population: every input (and bias) wired to every output, random weights.
 
     With ``config.initial_self_loops`` each output also gets a self-connection
-    (neat-python's "full" start for recurrent networks). No hidden nodes.
+    (neat-python's "full" start for recurrent networks). With ``config.initial_hidden`` = k,
+    the first k hidden slots are present in every genome, each fed by every input and bias and
+    feeding every output (neat-python's ``num_hidden`` with a "full_direct" start); else no
+    hidden nodes.
     """
     R, P, N = len(rng), config.pop_size, config.num_nodes
     device = rng.device
     template = torch.zeros(N, N, dtype=torch.bool, device=device)
     template[: config.first_output, config.first_output:config.first_hidden] = True
+    hidden_end = config.first_hidden + config.initial_hidden
+    template[: config.first_output, config.first_hidden:hidden_end] = True
+    template[config.first_hidden:hidden_end, config.first_output:config.first_hidden] = True
     if config.initial_self_loops:
         outs = torch.arange(config.first_output, config.first_hidden, device=device)
         template[outs, outs] = True
     conn = template.expand(R, P, N, N).clone()
     weight = config.weight_init_mean + config.weight_init_stdev * rng.randn(P, N, N, dtype=dtype)
     weight = torch.where(conn, weight.clamp(config.weight_min_value, config.weight_max_value), 0.0)
-    node = _fixed_nodes(config, device).expand(R, P, N).clone()
+    start_nodes = _fixed_nodes(config, device)
+    start_nodes[config.first_hidden:hidden_end] = True
+    node = start_nodes.expand(R, P, N).clone()
     sigma = config.sigma_init_mean + config.sigma_init_stdev * rng.randn(P, dtype=dtype)
     sigma = sigma.clamp(config.sigma_min_value, config.sigma_max_value)
     return Genomes(weight=weight, conn=conn, enabled=conn.clone(), node=node, sigma=sigma)

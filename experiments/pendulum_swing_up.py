@@ -50,9 +50,12 @@ def main() -> None:
     p.add_argument("--fixed-starts", action="store_true", help="the same starts every generation instead")
     p.add_argument("--cfg", default="{}", help="NEATConfig overrides as JSON, e.g. '{\"node_add_prob\": 0.2}'")
     p.add_argument("--rest-relative", action="store_true", help="NEAT-SNN: rates relative to rest")
+    p.add_argument("--control-period", type=float, default=0.05,
+                   help="network time per control step (s; NEAT-SNN runs it in 0.5 ms substeps); the plant "
+                        "always advances 0.05 s")
     a = p.parse_args()
     torch.set_num_threads(1)
-    task = PendulumTask(observe_velocity=a.velocity)
+    task = PendulumTask(observe_velocity=a.velocity, control_period_s=a.control_period)
     spec = (SpikingSpec(input_coding=a.coding, rate_window_steps=a.window, rest_relative=a.rest_relative)
             if a.kind == "snn" else SigmoidSpec(input_coding=a.coding))
     cfg = task_config(task, spec, **{"pop_size": a.pop, "max_hidden": 16, **json.loads(a.cfg)})

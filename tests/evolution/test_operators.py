@@ -1,13 +1,17 @@
 """Genetic operators: invariants (property tests) and the rules of NEAT, gene by gene."""
 
+import dataclasses
+
 import pytest
 import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from evolution.config import ConfigError
 from evolution.crossover import crossover
 from evolution.distance import distance_matrix
 from evolution.innovation import assign_split_nodes
+from evolution.kernels import breed as breed_kernel
 from evolution.mutate import (
     add_connection_candidates,
     mutate_add_connection,
@@ -17,6 +21,7 @@ from evolution.mutate import (
     mutate_toggle_one,
     mutate_weights,
 )
+from evolution.neat import NEAT
 from evolution.population import InvariantError, check_invariants, reachability
 from evolution.reproduce import allocate_offspring, reproduce
 from evolution.speciate import empty_species, speciate
@@ -59,10 +64,11 @@ def _apply(op, g, cfg, rng, state):
 @settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), ops=st.lists(st.sampled_from(OPS), min_size=1, max_size=25),
        feed_forward=st.booleans(), self_loops=st.booleans(), node_add=st.sampled_from([0.3, 1.0]),
-       neatc=st.booleans())
-def test_invariants_hold_after_every_operator(seed, ops, feed_forward, self_loops, node_add, neatc):
+       neatc=st.booleans(), hidden=st.integers(0, 2))
+def test_invariants_hold_after_every_operator(seed, ops, feed_forward, self_loops, node_add, neatc, hidden):
     cfg = small_config(feed_forward=feed_forward, initial_self_loops=self_loops and not feed_forward,
-                       node_add_prob=node_add, conn_add_prob=0.5, enabled_mutate_rate=0.1, **(NEATC if neatc else {}))
+                       node_add_prob=node_add, conn_add_prob=0.5, enabled_mutate_rate=0.1, initial_hidden=hidden,
+                       **(NEATC if neatc else {}))
     g, rng = population(cfg, seeds=(seed, seed + 1))
     species, sp = speciate(g, empty_species(2, cfg.num_nodes, 2, device=g.device, dtype=g.weight.dtype), cfg, rng, 0)
     state = {"species": species, "sp": sp, "gen": 0}
@@ -72,6 +78,53 @@ def test_invariants_hold_after_every_operator(seed, ops, feed_forward, self_loop
         check_invariants(g, cfg)  # gene => both nodes; fixed nodes; enabled => exists; finite; size P
         assert g.pop_size == cfg.pop_size
         assert bool((state["species"] >= 0).all())
+
+
+def test_a_start_with_hidden_nodes_wires_each_between_every_input_and_output():
+    cfg = small_config(num_inputs=3, num_outputs=2, max_hidden=5, initial_hidden=2, feed_forward=True)
+    g, _ = population(cfg)
+    check_invariants(g, cfg)
+    sources = range(cfg.first_output)  # 3 inputs and the bias
+    outputs = range(cfg.first_output, cfg.first_hidden)
+    hidden = range(cfg.first_hidden, cfg.first_hidden + 2)
+    expected = ({(i, o) for i in sources for o in outputs} | {(i, h) for i in sources for h in hidden}
+                | {(h, o) for h in hidden for o in outputs})
+    for r in range(g.num_runs):
+        for p in range(g.pop_size):
+            assert set(genome_genes(g, r, p)) == expected
+            assert all(enabled for _, enabled in genome_genes(g, r, p).values())
+    assert g.num_hidden(cfg).eq(2).all()
+    assert len(torch.unique(g.weight[..., 0, cfg.first_hidden])) == g.num_runs * g.pop_size  # weights drawn per gene
+    # the start without hidden nodes is unchanged: the same weights on the genes both have
+    plain, _ = population(dataclasses.replace(cfg, initial_hidden=0))
+    assert plain.num_hidden(cfg).eq(0).all()
+    assert torch.equal(plain.weight, torch.where(plain.conn, g.weight, 0.0))
+
+
+@pytest.mark.parametrize("hidden", [-1, 6, 2.0, True])
+def test_initial_hidden_must_fit_the_hidden_slots(hidden):
+    with pytest.raises(ConfigError, match="initial_hidden"):
+        small_config(max_hidden=5, initial_hidden=hidden)
+
+
+@pytest.mark.skipif(not breed_kernel.kernel_available(), reason="no C compiler: kernels unavailable")
+def test_kernels_breed_the_reference_generations_from_a_start_with_hidden_nodes():
+    cfg = small_config(pop_size=40, max_hidden=6, initial_hidden=3, node_add_prob=0.3, conn_add_prob=0.3,
+                       compatibility_threshold=1.0)
+    runs = []
+    for fused in (False, True):
+        neat = NEAT(cfg, seeds=[2, 9])
+        neat.fused_breeding = fused
+        g = torch.Generator().manual_seed(4)
+        for _ in range(8):
+            neat.tell(torch.rand(2, cfg.pop_size, generator=g, dtype=torch.float64))
+        runs.append(neat)
+    ref, fast = runs
+    for name, t in ref.genomes.tensors().items():
+        assert torch.equal(t, getattr(fast.genomes, name)), name
+    assert torch.equal(ref.species, fast.species)
+    check_invariants(fast.genomes, cfg)
+    assert int(fast.genomes.num_hidden(cfg).max()) > 3  # new nodes took the slots after the start's
 
 
 def test_check_invariants_catches_each_violation():
