@@ -212,6 +212,22 @@ def test_the_docs_pendulum_example_evolves_and_its_random_genomes_run():
     assert namespace["steps"].shape == (64, 2) and int(namespace["steps"].min()) >= 1
 
 
+def test_the_docs_swing_up_settings_run_as_written():
+    """docs/writing-a-task.md's Pendulum-v1 settings (2 generations instead of 400): the config,
+    spec and task they name are the ones that run, and the champions are tested on 50 starts."""
+    block = next(b for b in _doc_blocks("python") if "PendulumTask(control_period_s=0.01)" in b)
+    small = block.replace("generations=400", "generations=2").replace("print(", "(")
+    assert small.count("generations=2") == 1
+    namespace: dict = {}
+    exec(small, namespace)
+    config, spec, task = namespace["config"], namespace["spec"], namespace["task"]
+    assert config.weight_mutate_per_gene and config.node_add_prob == 0.2 and config.num_bias == 0
+    assert spec.rate_window_steps == 1 and spec.rest_relative and spec.input_coding == "signed"
+    assert task.control_period_s == 0.01 and task.observe_velocity
+    assert namespace["fitness"].fresh_starts and namespace["fitness"].episodes == 16
+    assert namespace["test"].returns.shape == (2, 50) and bool((namespace["test"].returns < 0).all())
+
+
 def test_the_readmes_quick_start_on_your_own_plant_runs():
     text = (Path(__file__).resolve().parents[2] / "README.md").read_text()
     block = next(b.split("```")[0] for b in text.split("```python\n")[1:] if "class Pendulum(Task)" in b)
