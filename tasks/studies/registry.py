@@ -35,6 +35,8 @@ class _GAPresets(Mapping):
     "neat-1.2.1-dpnv": NEAT C++ 1.2.1's own parameter files for double-pole balancing
     (``pole2_markov.ne``, ``p2nv.ne``; ``evolution.neat121``, with their populations of 150 and
     1000), loaded on first use: that module needs torch, and this one must not.
+    "neat-1.2.1-dpnv-per-gene": ``p2nv.ne`` with population 300 and per-gene weight steps, the
+    project's DPNV pick on tuning seeds (``evolution.neat121.NEAT121_DPNV_PER_GENE``).
     """
 
     _OWN = {
@@ -44,7 +46,8 @@ class _GAPresets(Mapping):
             elitism=2, elitism_min_species_size=1, crossover_prob=1.0, interspecies_crossover_prob=0.0,
             max_stagnation=20, compatibility_weight_coefficient=0.5, compatibility_normalize_min_genes=1),
     }
-    _NEAT121 = {"neat-1.2.1-dpv": "NEAT121_DPV", "neat-1.2.1-dpnv": "NEAT121_DPNV"}
+    _NEAT121 = {"neat-1.2.1-dpv": "NEAT121_DPV", "neat-1.2.1-dpnv": "NEAT121_DPNV",
+                "neat-1.2.1-dpnv-per-gene": "NEAT121_DPNV_PER_GENE"}
 
     def __getitem__(self, name: str) -> Mapping:
         if name in self._OWN:

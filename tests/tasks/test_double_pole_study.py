@@ -219,6 +219,19 @@ def test_neat_121_presets_reach_the_study_config_through_the_registry():
         GA_PRESETS["neat-1.2.2"]
 
 
+def test_the_dpnv_per_gene_pick_is_the_neat121_file_with_its_weight_rule_and_population_changed():
+    from evolution.neat121 import NEAT121_DPNV, NEAT121_DPNV_PER_GENE
+    from tasks.studies.registry import GA_CHOICES, STUDIES
+
+    assert "neat-1.2.1-dpnv-per-gene" in GA_CHOICES
+    changed = {k for k in NEAT121_DPNV if NEAT121_DPNV_PER_GENE[k] != NEAT121_DPNV[k]}
+    assert changed | (NEAT121_DPNV_PER_GENE.keys() - NEAT121_DPNV.keys()) == {
+        "pop_size", "weight_mutate_neatc", "weight_mutate_per_gene", "weight_mutate_rate", "weight_replace_rate"}
+    cfg = STUDIES["dpnv"].config("sigmoid", ga="neat-1.2.1-dpnv-per-gene", coding="signed")
+    assert cfg.pop_size == 300 and cfg.weight_mutate_per_gene and not cfg.weight_mutate_neatc
+    assert cfg.weight_mutate_power == NEAT121_DPNV["weight_mutate_power"] and cfg.num_inputs == 3
+
+
 def test_the_neat121_ablation_runs_each_setting_and_compares_it_to_the_preset(capsys):
     import json
 
