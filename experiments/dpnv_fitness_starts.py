@@ -22,19 +22,14 @@ import torch
 
 from evolution import NEAT, TaskFitness
 from tasks.studies.double_pole import (
-    GENERALIZATION_PASS,
-    LONG_BALANCE_STEPS,
     SpeciesChampionTest,
+    champions_test,
     study_config,
     study_spec,
     study_task,
 )
-from tasks.studies.generalization import (
-    GENERALIZATION_STEPS,
-    GRUAU_RANGES,
-    balanced_steps,
-    generalization_starts,
-)
+from tasks.studies.double_pole_report import neat121_counts
+from tasks.studies.generalization import GRUAU_RANGES
 
 BUDGET = 100_000  # evaluations
 
@@ -57,10 +52,7 @@ def main(argv: list[str] | None = None) -> None:
     general: dict[int, int] = {}
 
     def passes(champions):  # champions_pass, keeping the generalisation of those that pass
-        long = balanced_steps(champions, cfg, spec, max_steps=LONG_BALANCE_STEPS, task=task)[:, 0, 0]
-        held = (balanced_steps(champions, cfg, spec, starts=generalization_starts(), task=task)
-                >= GENERALIZATION_STEPS).sum(-1)[:, 0]
-        ok = (long >= LONG_BALANCE_STEPS) & (held >= GENERALIZATION_PASS)
+        ok, held = champions_test(champions, cfg, spec, task=task)
         for row, run in enumerate(torch.nonzero(neat.active_runs).flatten().tolist()):
             if ok[row]:
                 general[run] = int(held[row])
@@ -69,9 +61,7 @@ def main(argv: list[str] | None = None) -> None:
     start = time.process_time()
     neat.run(TaskFitness(task, cfg, spec, episodes=a.starts, starts=starts), BUDGET // cfg.pop_size,
              solved_fn=SpeciesChampionTest(neat, passes))
-    P = cfg.pop_size
-    evals = [P * (g - 1) + q + 1 if g > 0 else None
-             for g, q in zip(neat.solved_generation.tolist(), neat.solved_position.tolist(), strict=True)]
+    evals = neat121_counts(cfg.pop_size, neat.solved_generation.tolist(), neat.solved_position.tolist())
     solved = [e for e in evals if e is not None]
     print(json.dumps({"starts": a.starts, "seeds": f"{seeds[0]}-{seeds[-1]}", "solved": f"{len(solved)}/{len(seeds)}",
                       "mean": round(statistics.mean(solved)) if solved else None,

@@ -21,6 +21,7 @@ import torch
 
 from evolution.neat import NEAT
 from experiments.sensitivity import seed_range
+from tasks.studies.double_pole_report import neat121_counts
 from tasks.studies.registry import STUDIES
 from tasks.studies.results import mann_whitney
 
@@ -54,8 +55,7 @@ def run_setting(variant: str, controller: str, seeds: list[int], generations: in
              solved_fn=study.solved(controller, config, coding, champion_test="species" if variant == "dpnv" else None,
                                        neat=neat))
     P = config.pop_size
-    evals = [P * (g - 1) + q + 1 if g > 0 else None
-             for g, q in zip(neat.solved_generation.tolist(), neat.solved_position.tolist(), strict=True)]
+    evals = neat121_counts(P, neat.solved_generation.tolist(), neat.solved_position.tolist())
     return {"solved": sum(e is not None for e in evals), "runs": len(seeds), "evaluations": evals,
             "counted": [e if e is not None else P * (generations + 1) for e in evals],
             "cpu_s": round(time.process_time() - start, 1)}

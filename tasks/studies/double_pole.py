@@ -38,7 +38,7 @@ from tasks.double_pole import DoublePoleTask
 from tasks.studies.generalization import GENERALIZATION_STEPS, balanced_steps, generalization_starts
 from tasks.studies.registry import CONTROLLERS, STUDIES, ga_overrides
 
-__all__ = ["LONG_BALANCE_STEPS", "GENERALIZATION_PASS", "champion_solves", "champions_pass", "SpeciesChampionTest", "species_champion_test", "VARIANTS", "CODINGS", "NEAT121_SCALES", "POPULATION", "OBSERVATION_BOUNDS", "PUBLISHED", "study_task", "study_spec", "study_config",
+__all__ = ["LONG_BALANCE_STEPS", "GENERALIZATION_PASS", "champion_solves", "champions_pass", "champions_test", "SpeciesChampionTest", "species_champion_test", "VARIANTS", "CODINGS", "NEAT121_SCALES", "POPULATION", "OBSERVATION_BOUNDS", "PUBLISHED", "study_task", "study_spec", "study_config",
            "study_fitness", "study_solved"]
 
 VARIANTS = ("dpv", "dpnv")
@@ -164,14 +164,26 @@ def champions_pass(champions, config, spec=None, *, velocities: bool = False,
     """NEAT 2002's test of one genome per run (``champions`` ``[R, 1]``): ``[R]`` bool, true where it
     balances ``long_steps`` steps from the standard start and ``min_general`` or more of the 625
     generalisation starts for 1000 steps (the 625 only for those that passed the first)."""
+    return champions_test(champions, config, spec, velocities=velocities, long_steps=long_steps,
+                          min_general=min_general, task=task)[0]
+
+
+def champions_test(champions, config, spec=None, *, velocities: bool = False,
+                   long_steps: int = LONG_BALANCE_STEPS, min_general: int = GENERALIZATION_PASS,
+                   task: DoublePoleTask | None = None) -> tuple[Tensor, Tensor]:
+    """``champions_pass`` with what it measured: ``(solved [R] bool, held [R] int64)``, ``held`` the
+    generalisation starts each champion balances for 1000 steps (of 625), -1 where it was not
+    run (the champion failed the long balance first)."""
     long = balanced_steps(champions, config, spec, velocities=velocities, max_steps=long_steps,
                           task=task)[:, 0, 0]
     solved = long >= long_steps
+    held = torch.full_like(long, -1)
     if bool(solved.any()):
         general = (balanced_steps(champions, config, spec, velocities=velocities,
                                   starts=generalization_starts(), task=task) >= GENERALIZATION_STEPS).sum(-1)[:, 0]
+        held = torch.where(solved, general, held)
         solved = solved & (general >= min_general)
-    return solved
+    return solved, held
 
 
 class SpeciesChampionTest:

@@ -10,6 +10,7 @@ import math
 import os
 import statistics
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 from tasks.studies.double_pole import NEAT121_SCALES, PUBLISHED, study_spec, study_task
@@ -23,7 +24,7 @@ from tasks.studies.results import (
     mann_whitney,
 )
 
-__all__ = ["study_rows", "write_study_report", "STATIC_MAP_STEPS", "neat121_evaluations"]
+__all__ = ["study_rows", "write_study_report", "STATIC_MAP_STEPS", "neat121_evaluations", "neat121_counts"]
 
 EPISODE_PLOT_STEPS = 1000  # control steps of a champion's episode drawn in trajectory_*.png
 STATIC_MAP_STEPS = 20  # control steps (400 ms) a fresh network settles on each observation in the ablation
@@ -106,10 +107,15 @@ def neat121_evaluations(r: ControllerRuns) -> list[int | None]:
     """Per run, evaluations to solve as NEAT C++ 1.2.1 counts them: ``pop_size * (generation - 1)``
     plus the 1-based position of the first solving genome in its generation; None for a run that
     did not solve, or whose position was not recorded (results from before it was kept)."""
-    pop = r.config.pop_size
     positions = r.extra.get("solved_position") or [-1] * len(r.solved_generation)
-    return [pop * (g - 1) + q + 1 if g > 0 and q >= 0 else None
-            for g, q in zip(r.solved_generation, positions, strict=True)]
+    return neat121_counts(r.config.pop_size, r.solved_generation, positions)
+
+
+def neat121_counts(pop_size: int, solved_generation: Sequence[int], solved_position: Sequence[int]) -> list[int | None]:
+    """``neat121_evaluations`` from NEAT's per-run records (``NEAT.solved_generation``,
+    ``NEAT.solved_position``, as lists): ``pop_size * (generation - 1) + position + 1``, or None."""
+    return [pop_size * (g - 1) + q + 1 if g > 0 and q >= 0 else None
+            for g, q in zip(solved_generation, solved_position, strict=True)]
 
 
 def _fmt(value: float, digits: int = 0) -> str:

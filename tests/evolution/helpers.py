@@ -20,6 +20,30 @@ def population(cfg: NEATConfig, seeds=(0, 1)) -> tuple[Genomes, RunRNG]:
     return initial_genomes(cfg, rng), rng
 
 
+def bred_on_both_paths(cfg: NEATConfig, seeds: list[int], tells: list[tuple], **neat_kw):
+    """Two NEATs of ``cfg`` told the same ``tells`` (``NEAT.tell`` arguments, one tuple per
+    generation): ``(tensor path, C breeding path)``."""
+    from evolution.neat import NEAT
+
+    runs = []
+    for fused in (False, True):
+        neat = NEAT(cfg, seeds=seeds, **neat_kw)
+        neat.fused_breeding = fused
+        for args in tells:
+            neat.tell(*args)
+        runs.append(neat)
+    return runs[0], runs[1]
+
+
+def assert_same_breeding(ref, fast) -> None:
+    """The two paths bred the same genomes, species and species records, bit for bit."""
+    for name, t in ref.genomes.tensors().items():
+        assert torch.equal(t, getattr(fast.genomes, name)), name
+    assert torch.equal(ref.species, fast.species)
+    for name, t in ref.species_state.tensors().items():
+        assert torch.equal(t, getattr(fast.species_state, name)), name
+
+
 def genome_genes(g: Genomes, r: int, p: int) -> dict[tuple[int, int], tuple[float, bool]]:
     """{(i, j): (weight, enabled)} of one genome: the list form NEAT papers use."""
     out = {}

@@ -27,7 +27,7 @@ from evolution.reporters import BaseReporter
 from evolution.reproduce import reproduce, species_offspring
 from evolution.rng import RunRNG
 from evolution.speciate import SpeciesState, empty_species, speciate
-from tests.evolution.helpers import population, small_config
+from tests.evolution.helpers import assert_same_breeding, bred_on_both_paths, population, small_config
 
 needs_kernel = pytest.mark.skipif(not breed_kernel.kernel_available(), reason="no C compiler: kernels unavailable")
 
@@ -398,19 +398,10 @@ def test_kernels_breed_the_reference_generations_under_the_presets(variant):
     cfg = neat121_config(variant, num_inputs=4, num_outputs=1, num_bias=1, max_hidden=12, pop_size=60,
                          node_add_prob=0.1, conn_add_prob=0.3, max_stagnation=3, population_stagnation=4,
                          obliterate_interval=5, obliterate_min_age=3, compatibility_threshold=1.5)
-    runs = []
-    for fused in (False, True):
-        neat = NEAT(cfg, seeds=[5, 6])
-        neat.fused_breeding = fused
-        g = torch.Generator().manual_seed(1)
-        for k in range(14):
-            neat.tell(torch.rand(2, cfg.pop_size, generator=g, dtype=torch.float64) * (3 if k < 3 else 1))
-        runs.append(neat)
-    ref, fast = runs
-    _equal(ref.genomes, fast.genomes)
-    assert torch.equal(ref.species, fast.species)
-    for name, t in ref.species_state.tensors().items():
-        assert torch.equal(t, getattr(fast.species_state, name)), name
+    g = torch.Generator().manual_seed(1)
+    ref, fast = bred_on_both_paths(cfg, [5, 6], [
+        (torch.rand(2, cfg.pop_size, generator=g, dtype=torch.float64) * (3 if k < 3 else 1),) for k in range(14)])
+    assert_same_breeding(ref, fast)
     assert int(ref.genomes.conn.flatten(2).sum(-1).max()) >= 10  # long genomes: the tail rule ran
 
 
@@ -442,22 +433,14 @@ def test_kernels_breed_the_reference_generations_with_the_mechanisms_on(dtype):
                        population_stagnation=3, mutation_exclusive=True, mate_only_prob=0.2,
                        weight_mutate_neatc=True, crossover_average_prob=0.4, conn_add_recurrence=True,
                        recur_only_prob=0.3, toggle_enable_prob=0.3, gene_reenable_prob=0.2)
-    runs = []
-    for fused in (False, True):
-        neat = NEAT(cfg, seeds=[3, 11], dtype=dtype)
-        neat.fused_breeding = fused
-        g = torch.Generator().manual_seed(7)
-        for k in range(12):
-            solved = torch.zeros(2, cfg.pop_size, dtype=torch.bool)
-            solved[1, 0] = k == 8
-            neat.tell(torch.rand(2, cfg.pop_size, generator=g, dtype=torch.float64) * (1 + (k % 3 == 0)), solved)
-        runs.append(neat)
-    ref, fast = runs
-    for name, t in ref.genomes.tensors().items():
-        assert torch.equal(t, getattr(fast.genomes, name)), name
-    assert torch.equal(ref.species, fast.species)
-    for name, t in ref.species_state.tensors().items():
-        assert torch.equal(t, getattr(fast.species_state, name)), name
+    g = torch.Generator().manual_seed(7)
+    tells = []
+    for k in range(12):
+        solved = torch.zeros(2, cfg.pop_size, dtype=torch.bool)
+        solved[1, 0] = k == 8
+        tells.append((torch.rand(2, cfg.pop_size, generator=g, dtype=torch.float64) * (1 + (k % 3 == 0)), solved))
+    ref, fast = bred_on_both_paths(cfg, [3, 11], tells, dtype=dtype)
+    assert_same_breeding(ref, fast)
     assert torch.equal(ref.rng.offsets, fast.rng.offsets)
     assert ref.species_state.obliterated.any() or ref.species_state.run_stale.max() < 3
 

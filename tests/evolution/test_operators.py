@@ -21,11 +21,17 @@ from evolution.mutate import (
     mutate_toggle_one,
     mutate_weights,
 )
-from evolution.neat import NEAT
 from evolution.population import InvariantError, check_invariants, reachability
 from evolution.reproduce import allocate_offspring, reproduce
 from evolution.speciate import empty_species, speciate
-from tests.evolution.helpers import genome_genes, population, reference_distance, small_config
+from tests.evolution.helpers import (
+    assert_same_breeding,
+    bred_on_both_paths,
+    genome_genes,
+    population,
+    reference_distance,
+    small_config,
+)
 
 OPS = ["add_node", "add_conn", "weights", "sigma", "toggle", "toggle_one", "crossover", "generation"]
 # NEAT C++ 1.2.1's options (evolution.neat121), all on
@@ -111,18 +117,10 @@ def test_initial_hidden_must_fit_the_hidden_slots(hidden):
 def test_kernels_breed_the_reference_generations_from_a_start_with_hidden_nodes():
     cfg = small_config(pop_size=40, max_hidden=6, initial_hidden=3, node_add_prob=0.3, conn_add_prob=0.3,
                        compatibility_threshold=1.0)
-    runs = []
-    for fused in (False, True):
-        neat = NEAT(cfg, seeds=[2, 9])
-        neat.fused_breeding = fused
-        g = torch.Generator().manual_seed(4)
-        for _ in range(8):
-            neat.tell(torch.rand(2, cfg.pop_size, generator=g, dtype=torch.float64))
-        runs.append(neat)
-    ref, fast = runs
-    for name, t in ref.genomes.tensors().items():
-        assert torch.equal(t, getattr(fast.genomes, name)), name
-    assert torch.equal(ref.species, fast.species)
+    g = torch.Generator().manual_seed(4)
+    ref, fast = bred_on_both_paths(cfg, [2, 9], [(torch.rand(2, cfg.pop_size, generator=g, dtype=torch.float64),)
+                                                 for _ in range(8)])
+    assert_same_breeding(ref, fast)
     check_invariants(fast.genomes, cfg)
     assert int(fast.genomes.num_hidden(cfg).max()) > 3  # new nodes took the slots after the start's
 
