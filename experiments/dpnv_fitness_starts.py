@@ -2,13 +2,15 @@
 
     python -m experiments.dpnv_fitness_starts --starts 16 --seeds 20
 
-Sigmoid NEAT, the signed coding, NEAT C++ 1.2.1's test of a generation (the species champion)
+Sigmoid NEAT (``--kind snn``: NEAT-SNN), the signed coding, NEAT C++ 1.2.1's test of a generation (the species champion)
 and the ``neat-1.2.1-dpnv-per-gene`` GA, on tuning seeds 5000 + i unless ``--first-seed``, with a budget of 100,000
 evaluations. The fitness of a genome is its mean damping fitness from the standard start and
 ``starts - 1`` fixed random starts, drawn uniformly within Gruau's ranges (seed 0), not from the
 625-start grid the generalisation test uses. Prints one JSON line: solved runs, evaluations as
 NEAT 1.2.1 counts them (one evaluation is one genome, whatever its episodes), and the
-generalisation (of 625) of each solving champion.
+generalisation (of 625) of each solving champion. ``--network-ms`` sets the network time of a
+control step for NEAT-SNN (substeps of 0.5 ms; the plant still moves 20 ms), ``--spec`` and
+``--cfg`` take JSON overrides of the spec and the NEAT config.
 """
 
 from __future__ import annotations
@@ -17,19 +19,27 @@ import argparse
 import json
 import statistics
 import time
+from dataclasses import replace
 
 import torch
 
 from evolution import NEAT, TaskFitness
+from evolution.reporters import StdOutReporter
 from tasks.studies.double_pole import (
+    LONG_BALANCE_STEPS,
     SpeciesChampionTest,
     champions_test,
+    damping_fitness_starts,
     study_config,
     study_spec,
     study_task,
 )
 from tasks.studies.double_pole_report import neat121_counts
-from tasks.studies.generalization import GRUAU_RANGES
+from tasks.studies.generalization import (
+    GENERALIZATION_STEPS,
+    balanced_steps,
+    generalization_starts,
+)
 
 BUDGET = 100_000  # evaluations
 
@@ -39,16 +49,25 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--starts", type=int, default=4, help="episodes per evaluation: the standard start and K-1 random")
     p.add_argument("--seeds", type=int, default=20, help="runs, on seeds FIRST, FIRST + 1, ...")
     p.add_argument("--first-seed", type=int, default=5000, help="the first seed (default 5000: tuning seeds)")
+    p.add_argument("--kind", default="sigmoid", choices=("sigmoid", "snn"), help="the controller")
+    p.add_argument("--generations", type=int, default=None, help="default: 100,000 evaluations' worth")
+    p.add_argument("--network-ms", type=float, default=None,
+                   help="NEAT-SNN: network time per control step (ms; default the plant's 20 ms)")
+    p.add_argument("--spec", default="{}", help="JSON overrides of the controller spec")
+    p.add_argument("--cfg", default="{}", help="JSON overrides of the NEAT config")
+    p.add_argument("--progress", type=int, default=0, help="print a line every N generations (0: none)")
     a = p.parse_args(argv)
     torch.set_num_threads(1)
     seeds = list(range(a.first_seed, a.first_seed + a.seeds))
-    task, spec = study_task("dpnv", "signed"), study_spec("dpnv", "sigmoid", "signed")
-    cfg = study_config("dpnv", "sigmoid", ga="neat-1.2.1-dpnv-per-gene", coding="signed")
-    random = torch.zeros(a.starts - 1, 6, dtype=torch.float64)
-    unit = torch.rand(a.starts - 1, 4, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
-    random[:, :4] = (unit * 2 - 1) * torch.tensor(GRUAU_RANGES, dtype=torch.float64)
-    starts = task.starts(torch.cat([task.reset(1)[:, :6].to(torch.float64), random]))
+    task = study_task("dpnv", "signed")
+    if a.network_ms is not None:
+        task.control_period_s = a.network_ms / 1000.0
+    spec = replace(study_spec("dpnv", a.kind, "signed"), **json.loads(a.spec))
+    cfg = study_config("dpnv", a.kind, ga="neat-1.2.1-dpnv-per-gene", coding="signed", **json.loads(a.cfg))
+    starts = damping_fitness_starts(task, a.starts)
     neat = NEAT(cfg, seeds=seeds)
+    if a.progress:
+        neat.add_reporter(StdOutReporter(a.progress))
     general: dict[int, int] = {}
 
     def passes(champions):  # champions_pass, keeping the generalisation of those that pass
@@ -59,16 +78,24 @@ def main(argv: list[str] | None = None) -> None:
         return ok
 
     start = time.process_time()
-    neat.run(TaskFitness(task, cfg, spec, episodes=a.starts, starts=starts), BUDGET // cfg.pop_size,
-             solved_fn=SpeciesChampionTest(neat, passes))
+    generations = BUDGET // cfg.pop_size if a.generations is None else a.generations
+    result = neat.run(TaskFitness(task, cfg, spec, episodes=a.starts, starts=starts), generations,
+                      solved_fn=SpeciesChampionTest(neat, passes))
+    # how far the unsolved runs got: their best genome's balance from the standard start (steps, up to
+    # 100,000) and the generalisation starts it holds
+    long = balanced_steps(result.best_genomes, cfg, spec, max_steps=LONG_BALANCE_STEPS, task=task)[:, 0, 0]
+    held = (balanced_steps(result.best_genomes, cfg, spec, starts=generalization_starts(), task=task)
+            >= GENERALIZATION_STEPS).sum(-1)[:, 0]
     evals = neat121_counts(cfg.pop_size, neat.solved_generation.tolist(), neat.solved_position.tolist())
     solved = [e for e in evals if e is not None]
-    print(json.dumps({"starts": a.starts, "seeds": f"{seeds[0]}-{seeds[-1]}", "solved": f"{len(solved)}/{len(seeds)}",
+    print(json.dumps({"kind": a.kind, "network_ms": a.network_ms, "spec": a.spec, "cfg": a.cfg,
+                      "generations": generations, "starts": a.starts, "seeds": f"{seeds[0]}-{seeds[-1]}", "solved": f"{len(solved)}/{len(seeds)}",
                       "mean": round(statistics.mean(solved)) if solved else None,
                       "median": statistics.median(solved) if solved else None,
                       "generalization_mean": round(statistics.mean(general.values()), 1) if general else None,
                       "cpu_s": round(time.process_time() - start, 1), "evaluations": evals,
-                      "generalization": [general.get(r) for r in range(len(seeds))]}))
+                      "generalization": [general.get(r) for r in range(len(seeds))],
+                      "best_long_steps": long.tolist(), "best_held": held.tolist()}))
 
 
 if __name__ == "__main__":

@@ -47,6 +47,9 @@ def _one_line_error(capsys, argv, match):
     (["reproduce", "table2", "--seed", str(2**64), "--runs", "1"], "seeds must be below 2**63"),
     (["xor", "--runs", "100000000000"], "--runs 100000000000 needs about"),
     (["reproduce", "table1", "--runs", "100000000", "--controllers", "snn"], "use fewer --runs"),
+    (["reproduce", "dpv", "--fitness-starts", "4"], "fitness_starts must be 1 for dpv (a fitness over several "
+                                                      "starts only for dpnv), got 4"),
+    (["reproduce", "table2", "--champion-test", "species"], "'species' only for dpnv"),
 ])
 def test_bad_options_are_one_line_before_any_work(argv, match, capsys, tmp_path):
     out = tmp_path / "out"

@@ -174,6 +174,9 @@ def _configs(args: argparse.Namespace) -> list:
     table = args.table if args.command == "reproduce" else ("table1" if args.task == "markov" else "table2")
     controllers = args.controllers if args.command == "reproduce" else [args.controller]
     coding = getattr(args, "coding", "study")
+    if args.command == "reproduce":  # options the study does not offer stop here, before any work
+        for c in controllers:
+            STUDIES[table].check(c, coding, args.champion_test, args.fitness_starts)
     return [STUDIES[table].config(c, self_loops=args.self_loops, ga=args.ga, coding=coding) for c in controllers]
 
 
@@ -250,7 +253,8 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     command = _command_line(args)
     results = {}
     common = dict(resume=args.resume, self_loops=args.self_loops, ga=args.ga, checkpoint_every=args.checkpoint_every,
-                  device=args.device, progress=not args.quiet, coding=args.coding, champion_test=args.champion_test)
+                  device=args.device, progress=not args.quiet, coding=args.coding, champion_test=args.champion_test,
+                  fitness_starts=args.fitness_starts)
     with OutputLock(args.out, command):
         _clean(args.out)
         if args.resume and not _reproduce_checkpoints(args):
@@ -400,6 +404,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="dpnv only: the test of a generation: NEAT C++ 1.2.1's champion of the best species not "
                           "tested since it last improved ('species', the default), or each run's overall champion, "
                           "every generation ('champion', the default before 2026-12-03)")
+    rep.add_argument("--fitness-starts", type=_positive_int, default=1, metavar="K",
+                     help="dpnv only: the damping fitness averaged over K episodes, from the standard start and K-1 "
+                          "fixed random starts within Gruau's ranges (default 1: NEAT 2002's fitness; 32 gave "
+                          "solutions that hold 300 of the 625 starts; one evaluation is then K episodes)")
     rep.add_argument("--out", default=None, help="output folder (default: results/TABLE)")
     rep.add_argument("--resume", action="store_true", help="continue from the checkpoints in --out")
     rep.add_argument("--checkpoint-every", type=_positive_int, default=1, help="generations between checkpoints")

@@ -106,6 +106,7 @@ def merge_runs(parts: Sequence[ControllerRuns]) -> ControllerRuns:
     extra = {"complete": all(p.extra.get("complete", True) for p in parts), "shards": len(parts),
              "ga": first.extra.get("ga", ""), "coding": first.extra.get("coding", "study"),
              "champion_test": first.extra.get("champion_test", "champion"),
+             "fitness_starts": first.extra.get("fitness_starts", 1),
              "solved_position": [q for p in parts for q in p.extra.get("solved_position", [-1] * len(p.seeds))]}
     return ControllerRuns(controller=first.controller, seeds=[s for p in parts for s in p.seeds],
                           generations=first.generations,
@@ -156,7 +157,7 @@ def shard_layout(out: str | os.PathLike, controller: str, seeds: Sequence[int], 
 
 def _run_shard(task_name: str, shard: Shard, generations: int, self_loops: bool, checkpoint_every: int,
                device: str, threads: int | None, ga: str = "tuned", coding: str = "study",
-               champion_test: str | None = None) -> ControllerRuns:
+               champion_test: str | None = None, fitness_starts: int = 1) -> ControllerRuns:
     """Run (or continue) one shard; what a Ray task runs, and what the local path runs."""
     if threads is not None:
         torch.set_num_threads(threads)
@@ -167,7 +168,7 @@ def _run_shard(task_name: str, shard: Shard, generations: int, self_loops: bool,
     # retried task must continue from the checkpoint its killed predecessor left.
     return run_controller(task_name, shard.controller, shard.seeds, generations, shard.folder, resume=True,
                           self_loops=self_loops, ga=ga, checkpoint_every=checkpoint_every, device=device,
-                          progress=False, coding=coding, champion_test=champion_test)
+                          progress=False, coding=coding, champion_test=champion_test, fitness_starts=fitness_starts)
 
 
 def _finished_line(task_name: str, shard: Shard, count: int, r: ControllerRuns, done: int, total: int) -> str:
@@ -180,14 +181,15 @@ def run_controller_sharded(task_name: str, controller: str, seeds: list[int], ge
                            out: str | os.PathLike, *, resume: bool = False, shards: int | None = None,
                            self_loops: bool = False, ga: str = "tuned", checkpoint_every: int = 1,
                            device: str | torch.device = "cpu", progress: bool = True,
-                           coding: str = "study", champion_test: str | None = None) -> ControllerRuns:
+                           coding: str = "study", champion_test: str | None = None,
+                           fitness_starts: int = 1) -> ControllerRuns:
     """Like :func:`run_controller`, but shard by shard in this process, following the
     manifest in ``OUT/shards`` (how ``--resume`` without ``--ray`` completes a Ray run)."""
     layout = shard_layout(out, controller, seeds, shards, resume=resume)
     parts = []
     for shard in layout:
         parts.append(_run_shard(task_name, shard, generations, self_loops, checkpoint_every, str(device), None, ga,
-                                coding, champion_test))
+                                coding, champion_test, fitness_starts))
         if progress:
             print(_finished_line(task_name, shard, len(layout), parts[-1], len(parts), len(layout)), file=sys.stderr)
     return merge_runs(parts)
@@ -268,7 +270,7 @@ def run_controllers_on_ray(task_name: str, controllers: Sequence[str], seeds: li
                            resume: bool = False, self_loops: bool = False, ga: str = "tuned", checkpoint_every: int = 1,
                            device: str = "cpu", progress: bool = True, max_retries: int = 3,
                            cpus_per_shard: int = 1, coding: str = "study",
-                           champion_test: str | None = None) -> dict[str, ControllerRuns]:
+                           champion_test: str | None = None, fitness_starts: int = 1) -> dict[str, ControllerRuns]:
     """Evolve ``seeds`` of every controller as Ray tasks on the cluster at ``address``
     (``"auto"`` or ``"HOST:PORT"``), one task per shard, all controllers' shards in flight
     together; returns each controller's merged results, equal to :func:`run_controller`'s.
@@ -310,7 +312,7 @@ def run_controllers_on_ray(task_name: str, controllers: Sequence[str], seeds: li
         for layout in layouts.values():
             for shard in layout:
                 refs[remote.remote(task_name, shard, generations, self_loops, checkpoint_every, str(device),
-                                   cpus_per_shard, ga, coding, champion_test)] = shard
+                                   cpus_per_shard, ga, coding, champion_test, fitness_starts)] = shard
         total = len(refs)
         results: dict[tuple[str, int], ControllerRuns] = {}
         finished: list[Shard] = []

@@ -35,11 +35,16 @@ from evolution.phenotype import SPIKING_SIGMA, SigmoidSpec, SpikingSpec, network
 from evolution.population import Genomes
 from evolution.rollout import TaskFitness
 from tasks.double_pole import DoublePoleTask
-from tasks.studies.generalization import GENERALIZATION_STEPS, balanced_steps, generalization_starts
+from tasks.studies.generalization import (
+    GENERALIZATION_STEPS,
+    GRUAU_RANGES,
+    balanced_steps,
+    generalization_starts,
+)
 from tasks.studies.registry import CONTROLLERS, STUDIES, ga_overrides
 
 __all__ = ["LONG_BALANCE_STEPS", "GENERALIZATION_PASS", "champion_solves", "champions_pass", "champions_test", "SpeciesChampionTest", "species_champion_test", "VARIANTS", "CODINGS", "NEAT121_SCALES", "POPULATION", "OBSERVATION_BOUNDS", "PUBLISHED", "study_task", "study_spec", "study_config",
-           "study_fitness", "study_solved"]
+           "study_fitness", "study_solved", "damping_fitness_starts", "FITNESS_STARTS_SEED"]
 
 VARIANTS = ("dpv", "dpnv")
 # How observations reach the networks: "study": [0, 1] over OBSERVATION_BOUNDS (the study as first
@@ -53,6 +58,7 @@ OBSERVATION_BOUNDS = {"dpv": (2.4, 2.0, 0.3, 2.0, 0.3, 4.0), "dpnv": (2.4, 0.3, 
 LONG_BALANCE_STEPS = 100_000  # NEAT 2002: a champion must first balance this long from the standard start
 GENERALIZATION_PASS = 200  # NEAT 2002: of the 625 generalisation starts, a DPNV solution balances this many
 DPNV_EPISODE_STEPS = 1000  # Gruau's damping fitness is measured over 1000 steps
+FITNESS_STARTS_SEED = 0  # the random starts of a multi-start DPNV fitness (damping_fitness_starts)
 
 # Published figures, each with its source. ``evaluations``: mean evaluations to solve;
 # ``generalization``: mean of the 625 starts balanced by the solutions; ``population``.
@@ -139,9 +145,35 @@ def study_config(variant: str, controller: str, *, self_loops: bool = False, ga:
     return NEATConfig(**base)
 
 
-def study_fitness(variant: str, controller: str, config: NEATConfig, coding: str = "study") -> TaskFitness:
-    """``fitness_fn(genomes) -> [R, P]``: steps balanced (DPV) or the damping fitness (DPNV)."""
-    return TaskFitness(study_task(variant, coding), config, study_spec(variant, controller, coding))
+def damping_fitness_starts(task: DoublePoleTask, starts: int, seed: int = FITNESS_STARTS_SEED) -> Tensor:
+    """The start states of a DPNV fitness over ``starts`` episodes, ``[starts, 107]`` float64 task
+    states: the standard start (long pole at 0.07 rad) first, then ``starts - 1`` fixed random
+    starts, the long pole's x (m), x_dot (m/s), theta1 (rad) and theta1_dot (rad/s) drawn
+    uniformly within Gruau's ranges (``GRUAU_RANGES``, seeded by ``seed``), the short pole at
+    rest. Not the generalisation test's grid, so the test still measures something the fitness
+    did not see."""
+    if isinstance(starts, bool) or not isinstance(starts, int) or starts < 1:
+        raise ValueError(f"fitness_starts must be an int >= 1, got {starts!r}")
+    plant = torch.zeros(starts, 6, dtype=torch.float64)
+    plant[0] = task.reset(1)[0, :6]
+    unit = torch.rand(starts - 1, 4, generator=torch.Generator().manual_seed(seed), dtype=torch.float64)
+    plant[1:, :4] = (unit * 2 - 1) * torch.tensor(GRUAU_RANGES, dtype=torch.float64)
+    return task.starts(plant)
+
+
+def study_fitness(variant: str, controller: str, config: NEATConfig, coding: str = "study", *,
+                  fitness_starts: int = 1) -> TaskFitness:
+    """``fitness_fn(genomes) -> [R, P]``: steps balanced (DPV) or the damping fitness (DPNV).
+    ``fitness_starts`` (DPNV only): the mean damping fitness over that many episodes, from
+    ``damping_fitness_starts`` (1: the standard start alone, NEAT 2002's fitness)."""
+    _check(variant, controller, coding)
+    task, spec = study_task(variant, coding), study_spec(variant, controller, coding)
+    if fitness_starts == 1:
+        return TaskFitness(task, config, spec)
+    if variant != "dpnv":
+        raise ValueError(f"fitness_starts: only dpnv's damping fitness runs over several starts, got "
+                         f"{fitness_starts!r} for {variant}")
+    return TaskFitness(task, config, spec, episodes=fitness_starts, starts=damping_fitness_starts(task, fitness_starts))
 
 
 def champion_solves(genomes, fitness: Tensor, config, spec=None, *, velocities: bool = False,

@@ -88,6 +88,8 @@ def study_rows(results: dict[str, ControllerRuns], variant: str, *, generalizati
             row["coding"] = r.extra["coding"]
         if r.extra.get("champion_test", "champion") != "champion":
             row["champion_test"] = r.extra["champion_test"]
+        if r.extra.get("fitness_starts", 1) != 1:
+            row["fitness_starts"] = r.extra["fitness_starts"]
         for key, values in (("hidden_nodes", hidden), ("connections", conns), *(
                 (k, tests[k]) for k in ("generalization", "generalization_static_map") if k in tests)):
             row[f"{key}_mean_all"] = _mean(values)
@@ -153,6 +155,10 @@ def format_study_markdown(summary: dict, command: str) -> str:
     if any(row.get("champion_test") == "species" for row in summary["rows"].values()):
         lines += ["", "Test of a generation: NEAT C++ 1.2.1's, the champion of the best species not tested since it "
                   "last improved, one per run and generation (`--champion-test species`)."]
+    for k in sorted({row["fitness_starts"] for row in summary["rows"].values() if "fitness_starts" in row}):
+        lines += ["", f"Fitness: the mean damping fitness over {k} episodes, from the standard start and {k - 1} fixed "
+                  f"random starts within Gruau's ranges (`--fitness-starts {k}`); one evaluation is one genome of "
+                  f"{k} episodes, so a run's episodes are {k} times its evaluations."]
     if any(row.get("coding") == "signed" for row in summary["rows"].values()):
         scales = ", ".join(f"{v:g}" for v in NEAT121_SCALES[variant])
         lines += ["", f"Input coding: signed, as NEAT C++ 1.2.1 feeds its networks: each observed variable divided by "

@@ -93,7 +93,8 @@ class Study:
         description: what it is, one sentence.
         module: the module implementing ``study_task(name, coding)``, ``study_spec(name, controller,
             coding)``, ``study_config(name, controller, *, self_loops, ga, coding, **overrides)`` (``ga``:
-            a preset of ``GA_PRESETS``), ``study_fitness(name, controller, config, coding)`` and
+            a preset of ``GA_PRESETS``), ``study_fitness(name, controller, config, coding)`` (with
+            ``fitness_starts=K`` where it offers ``multi_start_fitness``) and
             ``study_solved(name, controller, config, coding, *, neat=None)`` (None where the config's
             fitness threshold decides).
         tuned_ga: each controller's GA (``--ga tuned``): ``(preset, extra NEATConfig overrides)``.
@@ -101,6 +102,8 @@ class Study:
             generalization)``.
         codings: the input codings it offers (``--coding``); the first is the study's own.
         champion_tests: the tests of a generation it offers (``--champion-test``); the first is the default.
+        multi_start_fitness: whether its fitness can run over several starts (``--fitness-starts``;
+            ``study_fitness(..., fitness_starts=K)``); otherwise only the one start of its own.
     """
 
     name: str
@@ -110,6 +113,7 @@ class Study:
     report: str
     codings: tuple[str, ...] = ("study", "signed")
     champion_tests: tuple[str, ...] = ("champion",)
+    multi_start_fitness: bool = False
     _cache: dict = field(default_factory=dict, compare=False, repr=False)
 
     def _impl(self):
@@ -117,9 +121,16 @@ class Study:
             self._cache["module"] = importlib.import_module(self.module)
         return self._cache["module"]
 
-    def check(self, controller: str, coding: str = "study", champion_test: str | None = None) -> str:
+    def check(self, controller: str, coding: str = "study", champion_test: str | None = None,
+              fitness_starts: int = 1) -> str:
         """``ReproduceError`` naming the option the study does not offer; returns the champion test
         (``champion_test``, or the study's default: its first)."""
+        if isinstance(fitness_starts, bool) or not isinstance(fitness_starts, int) or fitness_starts < 1:
+            raise ReproduceError(f"fitness_starts must be an int >= 1, got {fitness_starts!r}")
+        if fitness_starts != 1 and not self.multi_start_fitness:
+            offered = [s.name for s in STUDIES.values() if s.multi_start_fitness]
+            raise ReproduceError(f"fitness_starts must be 1 for {self.name} (a fitness over several starts only for "
+                                 f"{', '.join(offered)}), got {fitness_starts!r}")
         champion_test = self.champion_tests[0] if champion_test is None else champion_test
         if controller not in CONTROLLERS:
             raise ReproduceError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
@@ -162,10 +173,12 @@ class Study:
         return self._impl().study_config(self.name, controller, self_loops=self_loops, ga=preset, coding=coding,
                                          **{**extra, **overrides})
 
-    def fitness(self, controller: str, config, coding: str = "study"):
-        """``fitness_fn(genomes) -> [R, P]``."""
-        self.check(controller, coding)
-        return self._impl().study_fitness(self.name, controller, config, coding)
+    def fitness(self, controller: str, config, coding: str = "study", fitness_starts: int = 1):
+        """``fitness_fn(genomes) -> [R, P]``; ``fitness_starts``: episodes per evaluation, where the
+        study offers it (``multi_start_fitness``)."""
+        self.check(controller, coding, fitness_starts=fitness_starts)
+        extra = {} if fitness_starts == 1 else {"fitness_starts": fitness_starts}
+        return self._impl().study_fitness(self.name, controller, config, coding, **extra)
 
     def solved(self, controller: str, config, coding: str = "study", *, champion_test: str | None = None,
                neat=None):
@@ -210,12 +223,13 @@ STUDIES: Mapping[str, Study] = MappingProxyType({s.name: s for s in (
           {"sigmoid": _NEAT_PYTHON_01, "snn": _NEAT_PYTHON_01}, _DOUBLE_POLE_REPORT),
     # DPNV's test of a generation: NEAT C++ 1.2.1's ("species": the champion of the best species not
     # tested since it improved), or each generation's overall champion ("champion", the default
-    # before 2026-12-03, which retests the same genome while it stays the best)
+    # before 2026-12-03, which retests the same genome while it stays the best); its damping fitness
+    # can be the mean over several starts (--fitness-starts, docs/beyond-the-paper.md)
     Study("dpnv", "double-pole balancing without velocities (NEAT 2002): x and both angles, Gruau's damping "
           "fitness over 1000 steps, population 1000, solved when a champion balances 100,000 steps and 200 of "
           "the 625 generalisation starts", "tasks.studies.double_pole",
           {"sigmoid": _NEAT_PYTHON_01, "snn": _NEAT_PYTHON_01}, _DOUBLE_POLE_REPORT,
-          champion_tests=("species", "champion")),
+          champion_tests=("species", "champion"), multi_start_fitness=True),
 )})
 
 

@@ -49,8 +49,9 @@ def open_run(path: str | os.PathLike, identity: dict, *, resume: bool, device: s
     if not isinstance(saved, dict):
         raise ReproduceError(f"cannot resume {path}: it is not a checkpoint of `snn-neat {command}`")
     for key, value in identity.items():
-        if saved.get(key, defaults.get(key)) != value:
-            raise ReproduceError(f"cannot resume {path}: it was written with {key}={saved.get(key)!r}, "
+        written = saved.get(key, defaults.get(key))
+        if written != value:
+            raise ReproduceError(f"cannot resume {path}: it was written with {key}={written!r}, "
                                  f"this call asks for {key}={value!r}")
     neat = NEAT.from_state_dict(data["neat"], device=device, name=str(path))
     wall, rows = data.get("wall_s"), data.get("statistics", [])

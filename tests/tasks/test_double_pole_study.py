@@ -13,6 +13,7 @@ from tasks.studies.double_pole import (
     OBSERVATION_BOUNDS,
     POPULATION,
     PUBLISHED,
+    damping_fitness_starts,
     study_config,
     study_fitness,
     study_solved,
@@ -203,6 +204,73 @@ def test_reproduce_dpnv_with_neat_121s_test_resumes_to_the_same_bits(tmp_path):
     assert default.extra["champion_test"] == "species" and default.solved_generation == straight.solved_generation
     with pytest.raises(ReproduceError, match="'species' only for dpnv"):
         run_controller("dpv", "sigmoid", [0], 1, tmp_path / "dpv", progress=False, champion_test="species")
+
+
+def test_the_fitness_starts_are_the_standard_one_then_fixed_random_ones_in_gruaus_ranges():
+    from tasks.studies.generalization import GRUAU_RANGES
+
+    task = study_task("dpnv", "signed")
+    starts = damping_fitness_starts(task, 50)
+    assert starts.shape == (50, task.reset(1).shape[1]) and starts.dtype == torch.float64
+    assert torch.equal(starts[0], task.reset(1)[0])  # the standard start first
+    assert torch.equal(damping_fitness_starts(task, 1), task.reset(1))
+    assert torch.equal(damping_fitness_starts(task, 50), starts)  # fixed: the same starts every call
+    assert torch.equal(damping_fitness_starts(task, 8)[1:], starts[1:8])  # K grows by adding starts
+    ranges = torch.tensor(GRUAU_RANGES, dtype=torch.float64)
+    assert bool((starts[1:, :4].abs() <= ranges).all()) and bool((starts[1:, 4:] == 0).all())  # short pole at rest
+    assert bool((starts[1:, :4].abs() > ranges / 2).any(0).all())  # spread over the ranges, not clustered
+    assert not torch.equal(damping_fitness_starts(task, 50, seed=1), starts)
+    for bad in (0, -1, 2.0, True):
+        with pytest.raises(ValueError, match="fitness_starts must be an int >= 1"):
+            damping_fitness_starts(task, bad)
+
+
+def test_a_fitness_over_k_starts_is_the_mean_of_each_starts_damping_fitness():
+    from evolution import TaskFitness
+
+    for kind in ("sigmoid", "snn"):
+        cfg = study_config("dpnv", kind, coding="signed", pop_size=12)
+        genomes = NEAT(cfg, seeds=[3]).ask()
+        task, spec = study_task("dpnv", "signed"), study_spec("dpnv", kind, "signed")
+        starts = damping_fitness_starts(task, 3)
+        each = torch.stack([TaskFitness(task, cfg, spec, starts=starts[k:k + 1])(genomes) for k in range(3)])
+        together = study_fitness("dpnv", kind, cfg, "signed", fitness_starts=3)(genomes)
+        assert torch.allclose(together.double(), each.double().mean(0), rtol=1e-6, atol=0), kind
+        assert torch.equal(study_fitness("dpnv", kind, cfg, "signed", fitness_starts=1)(genomes), each[0])
+        assert not torch.allclose(each[1], each[0])  # the other starts change what a genome scores
+    with pytest.raises(ValueError, match="only dpnv's damping fitness runs over several starts"):
+        study_fitness("dpv", "sigmoid", study_config("dpv", "sigmoid"), fitness_starts=2)
+
+
+def test_reproduce_dpnv_with_fitness_starts_records_them_and_resumes_only_with_them(tmp_path):
+    out = tmp_path / "k2"
+    kw = dict(progress=False, ga="neat-1.2.1-dpnv-per-gene", coding="signed")
+    r = run_controller("dpnv", "sigmoid", [0, 1], 2, out, fitness_starts=2, **kw)
+    one = run_controller("dpnv", "sigmoid", [0, 1], 2, tmp_path / "k1", **kw)
+    assert r.extra["fitness_starts"] == 2 and one.extra["fitness_starts"] == 1
+    assert not torch.equal(r.history, one.history)  # the option reaches the fitness
+    with pytest.raises(ReproduceError, match=r"fitness_starts=2, this call asks for fitness_starts=1"):
+        run_controller("dpnv", "sigmoid", [0, 1], 2, out, resume=True, **kw)
+    assert run_controller("dpnv", "sigmoid", [0, 1], 2, out, resume=True, fitness_starts=2, **kw).history.equal(r.history)
+    # a checkpoint written before the option existed holds no fitness_starts: it ran with one start
+    from evolution.checkpoint import atomic_torch_save
+
+    old = load_checkpoint_dict(tmp_path / "k1" / "sigmoid.ckpt")
+    del old["identity"]["fitness_starts"]
+    atomic_torch_save(old, tmp_path / "k1" / "sigmoid.ckpt")
+    assert run_controller("dpnv", "sigmoid", [0, 1], 2, tmp_path / "k1", resume=True, **kw).history.equal(one.history)
+    with pytest.raises(ReproduceError, match=r"fitness_starts=1, this call asks for fitness_starts=2"):
+        run_controller("dpnv", "sigmoid", [0, 1], 2, tmp_path / "k1", resume=True, fitness_starts=2, **kw)
+    write_study_report({"sigmoid": r}, "dpnv", out, command="test", generalization=False)
+    md = (out / "dpnv.md").read_text()
+    assert "Fitness: the mean damping fitness over 2 episodes" in md and "`--fitness-starts 2`" in md
+    assert json.loads((out / "summary.json").read_text())["rows"]["sigmoid"]["fitness_starts"] == 2
+    assert "fitness_starts" not in study_rows({"sigmoid": one}, "dpnv", generalization=False)["rows"]["sigmoid"]
+    for bad in (0, 1.5):
+        with pytest.raises(ReproduceError, match="fitness_starts must be an int >= 1"):
+            run_controller("dpnv", "sigmoid", [0], 1, tmp_path / "bad", fitness_starts=bad, **kw)
+    with pytest.raises(ReproduceError, match="fitness_starts must be 1 for table2"):
+        run_controller("table2", "sigmoid", [0], 1, tmp_path / "t2", progress=False, fitness_starts=3)
 
 
 def test_neat_121_presets_reach_the_study_config_through_the_registry():
