@@ -22,7 +22,7 @@ import math
 import os
 from dataclasses import dataclass, field, fields
 
-__all__ = ["NEATConfig", "ConfigError"]
+__all__ = ["NEATConfig", "ConfigError", "config_defaults"]
 
 
 class ConfigError(ValueError):
@@ -246,6 +246,13 @@ class NEATConfig:
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+
+def config_defaults() -> dict:
+    """Each ``NEATConfig`` field's default (the value a config stored before the field existed had)."""
+    return {f.name: f.default if f.default is not dataclasses.MISSING else f.default_factory()
+            for f in dataclasses.fields(NEATConfig)
+            if f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING}
 
 
 INI_ALIASES = {"initial_connection": "_initial_connection"}

@@ -10,7 +10,8 @@ evaluations. The fitness of a genome is its mean damping fitness from the standa
 NEAT 1.2.1 counts them (one evaluation is one genome, whatever its episodes), and the
 generalisation (of 625) of each solving champion. ``--network-ms`` sets the network time of a
 control step for NEAT-SNN (substeps of 0.5 ms; the plant still moves 20 ms), ``--spec`` and
-``--cfg`` take JSON overrides of the spec and the NEAT config.
+``--cfg`` take JSON overrides of the spec and the NEAT config (the spec's ``neuron`` by preset name,
+``snn_torch.functional.izhikevich.PRESETS``).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import torch
 
 from evolution import NEAT, TaskFitness
 from evolution.reporters import StdOutReporter
+from snn_torch.functional.izhikevich import PRESETS
 from tasks.studies.double_pole import (
     LONG_BALANCE_STEPS,
     SpeciesChampionTest,
@@ -62,7 +64,10 @@ def main(argv: list[str] | None = None) -> None:
     task = study_task("dpnv", "signed")
     if a.network_ms is not None:
         task.control_period_s = a.network_ms / 1000.0
-    spec = replace(study_spec("dpnv", a.kind, "signed"), **json.loads(a.spec))
+    spec_overrides = json.loads(a.spec)
+    if isinstance(spec_overrides.get("neuron"), str):  # a preset's name, e.g. "regular_spiking"
+        spec_overrides["neuron"] = PRESETS[spec_overrides["neuron"]]
+    spec = replace(study_spec("dpnv", a.kind, "signed"), **spec_overrides)
     cfg = study_config("dpnv", a.kind, ga="neat-1.2.1-dpnv-per-gene", coding="signed", **json.loads(a.cfg))
     starts = damping_fitness_starts(task, a.starts)
     neat = NEAT(cfg, seeds=seeds)

@@ -35,9 +35,14 @@ from snn_torch.functional.decode import ordered_sum
 from snn_torch.functional.portable_math import sin_cos
 
 __all__ = ["DoublePoleParams", "DEFAULT_DOUBLE_POLE", "double_pole_derivatives", "double_pole_step",
-           "double_pole_failed", "DoublePoleTask", "DAMPING_WINDOW"]
+           "double_pole_failed", "DoublePoleTask", "DAMPING_WINDOW",
+           "DAMPING_TOTAL_FLOOR"]
 
 DAMPING_WINDOW = 100  # steps in Gruau's damping term
+# the least sum of |x| + |x_dot| + |theta1| + |theta1_dot| (m, m/s, rad, rad/s) over the window the
+# damping term divides by (tasks/csrc/double_pole.c repeats it): a balancing controller's sum is
+# around 1 to 10; only a plant at rest to within a micro-unit reaches it
+DAMPING_TOTAL_FLOOR = 1e-6
 _CSRC = Path(__file__).resolve().parent / "csrc"
 
 
@@ -207,7 +212,10 @@ class DoublePoleTask(Task):
         ring = new.scatter(1, slot, torch.where(failed, new.gather(1, slot).squeeze(1), jiggle).unsqueeze(1))
         # paid once: at the failure, or on reaching max_steps (a longer rollout pays nothing more)
         ends = torch.where(failed, state[:, 6] < self.max_steps, balanced == self.max_steps)
-        total = ordered_sum(ring[:, 7:])  # slot order, as the native step
+        # slot order, as the native step; floored, so a plant held exactly at rest scores a finite
+        # fitness (NEAT's code would divide by zero, and one infinite fitness turns the
+        # offspring shares into NaN)
+        total = ordered_sum(ring[:, 7:]).clamp_min(DAMPING_TOTAL_FLOOR)
         late = balanced > DAMPING_WINDOW
         fitness = 0.1 * (balanced / 1000.0) + torch.where(late, 0.9 * (0.75 / torch.where(late, total, 1.0)), 0.0)
         return ring, torch.where(ends, fitness, 0.0), failed

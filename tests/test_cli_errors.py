@@ -179,6 +179,25 @@ def test_ctrl_c_exits_130_naming_the_resume_command_and_resume_equals_uninterrup
         main([*argv, "--out", str(tmp_path / "cut")])
 
 
+def test_an_xor_checkpoint_from_before_a_config_field_existed_resumes(tmp_path, capsys):
+    from evolution.checkpoint import atomic_torch_save
+
+    argv = ["xor", "--runs", "2", "--generations", "4", "--seed", "3", "--quiet", "--checkpoint-every", "1"]
+    assert main([*argv, "--out", str(tmp_path / "ref")]) == 0
+    assert main([*argv, "--out", str(tmp_path / "old")]) == 0
+    path = tmp_path / "old" / "xor.ckpt"
+    old = load_checkpoint_dict(path)
+    for part in (old["identity"]["config"], old["neat"]["config"]):  # as written before initial_hidden existed
+        del part["initial_hidden"]
+    atomic_torch_save(old, path)
+    assert main([*argv, "--out", str(tmp_path / "old"), "--resume"]) == 0
+    assert (tmp_path / "old" / "runs.csv").read_bytes() == (tmp_path / "ref" / "runs.csv").read_bytes()
+    old["identity"]["config"]["pop_size"] += 1  # a field that did change still refuses
+    atomic_torch_save(old, path)
+    with pytest.raises(CommandError, match="cannot resume .* it was written with config="):
+        main([*argv, "--out", str(tmp_path / "old"), "--resume"])
+
+
 def test_an_interrupted_xor_report_does_not_look_complete(tmp_path, monkeypatch):
     import tasks.studies.xor as xor_mod
 

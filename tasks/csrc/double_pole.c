@@ -80,6 +80,9 @@ int double_pole_step_f64(const double *state, const double *action, double *out,
         }
         double total = 0.0; /* slot order from 0, as the torch step's ordered_sum */
         for (int64_t i = 0; i < window; ++i) total += o[7 + i];
+        /* DAMPING_TOTAL_FLOOR of tasks/double_pole.py: a plant held exactly at rest pays a finite
+           fitness, not 1/0 (NaN stays NaN, as torch's clamp_min leaves it) */
+        if (total < 1e-6) total = 1e-6;
         /* torch computes `0.75 / total` (a number over a tensor) as reciprocal(total) * 0.75 */
         const double late = balanced > (double)window ? 0.9 * ((1.0 / total) * 0.75) : 0.0;
         reward[r] = 0.1 * (balanced / 1000.0) + late;

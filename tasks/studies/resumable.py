@@ -29,7 +29,8 @@ def open_run(path: str | os.PathLike, identity: dict, *, resume: bool, device: s
     ``fresh()`` (which needs no ``resume``: a ``--resume`` with nothing to continue is an error,
     not a silent new start, unless ``missing_ok``: one of several checkpoints a command resumes
     may not have been written yet). ``defaults``: the value an identity key had before it was
-    recorded, so older checkpoints resume. Returns ``(neat, checkpoint)`` (``{}`` for a fresh run).
+    recorded, so older checkpoints resume; for a dict-valued key (a config), a dict of the values
+    its fields had before they were added. Returns ``(neat, checkpoint)`` (``{}`` for a fresh run).
     The one resume check of every command (``reproduce``, ``evolve``, ``xor``)."""
     path = Path(path)
     defaults = defaults or {}
@@ -50,6 +51,8 @@ def open_run(path: str | os.PathLike, identity: dict, *, resume: bool, device: s
         raise ReproduceError(f"cannot resume {path}: it is not a checkpoint of `snn-neat {command}`")
     for key, value in identity.items():
         written = saved.get(key, defaults.get(key))
+        if isinstance(written, dict) and isinstance(defaults.get(key), dict):
+            written = {**defaults[key], **written}  # fields added since it was written
         if written != value:
             raise ReproduceError(f"cannot resume {path}: it was written with {key}={written!r}, "
                                  f"this call asks for {key}={value!r}")

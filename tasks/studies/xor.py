@@ -20,7 +20,7 @@ import torch
 from torch import Tensor
 
 from evolution.checkpoint import atomic_write_bytes
-from evolution.config import NEATConfig
+from evolution.config import NEATConfig, config_defaults
 from evolution.neat import NEAT
 from evolution.population import Genomes
 from evolution.reporters import TqdmReporter
@@ -112,7 +112,7 @@ def run_xor(seeds: list[int], *, generations: int = 100, config: NEATConfig = XO
     if out is not None:
         identity = {"command": "xor", "seeds": list(seeds), "generations": generations, "config": config.to_dict()}
         path = Path(out) / "xor.ckpt"
-        neat, data = open_run(path, identity, resume=resume, device=device,
+        neat, data = open_run(path, identity, resume=resume, device=device, defaults={"config": config_defaults()},
                               fresh=lambda: NEAT(config, seeds=seeds, device=device))
         checkpoint = RunCheckpoint(path, identity, generations, every=checkpoint_every,
                                    wall_s=float(data.get("wall_s", 0.0)))

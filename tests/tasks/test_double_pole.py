@@ -123,6 +123,28 @@ def test_damping_fitness_is_gruaus(off_after, outcome, c_kernels, monkeypatch):
             "falls early": balanced < 100}[outcome]
 
 
+def test_a_plant_held_at_rest_scores_a_finite_damping_fitness_on_both_paths():
+    """Started exactly at rest and never pushed, the damping term's sum is 0: the fitness is
+    floored (DAMPING_TOTAL_FLOOR), not 1/0, and the native step agrees."""
+    from evolution.kernels.native_plant import native_plant
+    from tasks.double_pole import DAMPING_TOTAL_FLOOR
+
+    task = DoublePoleTask.without_velocities(max_steps=150)
+    plant = native_plant(task, torch.float64)
+    assert plant is not None
+    state = task.starts(torch.zeros(2, 6, dtype=torch.float64))
+    state[1, 2] = 0.01  # a second row that moves: its fitness is not floored
+    paid, ref_paid = torch.zeros(2, dtype=torch.float64), torch.zeros(2, dtype=torch.float64)
+    ours = ref = state
+    for _ in range(150):
+        ours, reward, _ = plant.step(ours, torch.zeros(2, 1, dtype=torch.float64))
+        ref, ref_reward, failed = task.step(ref, torch.zeros(2, 1, dtype=torch.float64))
+        paid, ref_paid = paid + reward, ref_paid + ref_reward
+    assert not bool(failed[0]) and torch.equal(ours, ref) and torch.equal(paid, ref_paid)
+    assert paid[0].item() == 0.1 * 150 / 1000 + 0.9 * (0.75 / DAMPING_TOTAL_FLOOR)
+    assert torch.isfinite(paid).all() and paid[1] < 1.0
+
+
 @pytest.mark.parametrize("velocities", [True, False])
 def test_the_native_step_is_the_torch_step_bit_for_bit(velocities):
     """The native step (tasks/csrc/double_pole.c) against the torch definition, step by step from
