@@ -159,6 +159,13 @@ class NEATConfig:
     # drawn. Off: any free slot.
     conn_add_recurrence: bool = False
     recur_only_prob: float = field(default=0.0, metadata=_range(0, 1))  # [NEATC] 0 DPV, 0.2 DPNV
+    # [NEATC] ``newlink_tries`` (20): the new connection is drawn as ``Genome::mutate_add_link``
+    # draws it, up to this many tries, each a random pair (from any present node to a present
+    # non-input node; in the recurrent draw every other try, on average, a self-loop of a random
+    # non-input node), the first one that is free and of the kind drawn taken; none when every
+    # try fails. Sampled exactly from that distribution with one uniform. 0: uniformly among
+    # the free slots of the kind.
+    conn_add_tries: int = field(default=0, metadata=_range(0, None, integer=True))
     # [NEATC] ``mutate_toggle_enable_prob`` (0.1 DPNV): one random gene (slot order) flips its
     # enabled flag, but is only disabled if its source keeps another enabled gene.
     toggle_enable_prob: float = field(default=0.0, metadata=_range(0, 1))

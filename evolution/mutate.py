@@ -177,6 +177,34 @@ def _pick_for(mask: Tensor, u: Tensor) -> tuple[Tensor, Tensor, Tensor]:
     return slot // N, slot % N, n > 0
 
 
+def _pick_by_tries(mask: Tensor, node: Tensor, u: Tensor, loops: Tensor, tries: int, first_output: int
+                   ) -> tuple[Tensor, Tensor, Tensor]:
+    """[NEATC]'s ``mutate_add_link`` draw for a subset of genomes, from one uniform ``u[K]``: each of
+    ``tries`` tries picks a pair (i any present node, j a present non-input node; where ``loops[K]``,
+    the recurrent draw, half the tries a self-loop j -> j instead), and the first pair in
+    ``mask[K, N, N]`` is taken. A slot's chance is then its share of the pairs (a self-loop
+    ``1 + nodes`` shares in the recurrent draw, ``1`` otherwise) times ``1 - (1 - S)^tries``, S the
+    chance of one try; ``u`` below ``(1 - S)^tries`` is a failure. The breeding kernel repeats
+    these operations (``breed.c``). Returns ``(i, j, possible)``."""
+    K, N = mask.shape[0], mask.shape[-1]
+    nodes = node.sum(1)
+    targets = node[:, first_output:].sum(1)
+    loop_share = torch.where(loops, nodes, 0).view(K, 1, 1) * torch.eye(N, dtype=torch.long, device=mask.device)
+    flat = (mask.long() * (1 + loop_share)).flatten(1)
+    total = flat.sum(1)
+    pairs = nodes * targets * torch.where(loops, 2, 1)
+    one_try = total.double() / pairs.clamp_min(1).double()
+    miss = 1.0 - one_try
+    fail = torch.ones_like(u)
+    for _ in range(tries):
+        fail = fail * miss
+    possible = (total > 0) & ~(u < fail)
+    share = torch.where(possible, (u - fail) / torch.where(possible, 1.0 - fail, 1.0), 0.0)
+    target = (share * total.double()).long().clamp_max(total - 1).clamp_min(0)
+    slot = torch.searchsorted(flat.cumsum(1), (target + 1).unsqueeze(1)).squeeze(1).clamp_max(N * N - 1)
+    return slot // N, slot % N, possible
+
+
 def mutate_add_connection(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor, *,
                           return_wanted: bool = False, recurrent: Tensor | None = None,
                           prob: Tensor | None = None) -> Genomes | tuple[Genomes, Tensor]:
@@ -188,7 +216,8 @@ def mutate_add_connection(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tens
     (whether or not a slot was free; [NEATC]'s exclusive mutations go by it).
     ``recurrent[R, P]`` (with ``cfg.conn_add_recurrence``): those genomes take a recurrent
     slot (``recurrent_slots``), the others a non-recurrent one (without it: any free slot,
-    as ``reproduce`` draws it). ``prob[R, P]``: each genome's
+    as ``reproduce`` draws it); ``cfg.conn_add_tries``: the slot drawn as [NEATC] draws it
+    (``_pick_by_tries``), else uniformly. ``prob[R, P]``: each genome's
     probability instead of ``conn_add_prob``.
     """
     P = g.pop_size
@@ -201,10 +230,16 @@ def mutate_add_connection(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tens
         return (g, want) if return_wanted else g
     sub = Genomes(**{k: _flat(t)[rows].unsqueeze(0) for k, t in g.tensors().items()})
     cand = add_connection_candidates(sub, cfg)[0]
+    loops = torch.zeros(rows.numel(), dtype=torch.bool, device=g.device)
     if cfg.conn_add_recurrence and recurrent is not None:
         rec = recurrent_slots(sub, cfg)[0]
-        cand = cand & (rec == _flat(recurrent)[rows].view(-1, 1, 1))
-    src, dst, possible = _pick_for(cand, _flat(pick)[rows])
+        loops = _flat(recurrent)[rows]
+        cand = cand & (rec == loops.view(-1, 1, 1))
+    if cfg.conn_add_tries:
+        src, dst, possible = _pick_by_tries(cand, sub.node[0], _flat(pick)[rows], loops, cfg.conn_add_tries,
+                                            cfg.first_output)
+    else:
+        src, dst, possible = _pick_for(cand, _flat(pick)[rows])
     rows, src, dst = rows[possible], src[possible], dst[possible]
     weight, conn, enabled = g.weight.clone(), g.conn.clone(), g.enabled.clone()
     _flat(weight)[rows, src, dst] = _flat(init)[rows]

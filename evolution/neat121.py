@@ -5,8 +5,6 @@
 layout (``num_inputs``, ``num_outputs``, ``num_bias``): the caller does, as for any task.
 
 Where the presets only approximate NEAT 1.2.1 (``NEATConfig`` has no option for it):
-- ``newlink_tries`` (20 random tries at a free slot of the kind drawn): ours picks among all
-  free slots of that kind, so it fails only where none is left.
 - slot order stands for gene (innovation) order: the tail of ``mutate_link_weights``, the gene
   ``mutate_toggle_enable`` picks and the first disabled gene ``mutate_gene_reenable`` enables.
 - delta coding when a run has a single species: NEAT 1.2.1 gives it ``pop - pop // 2``
@@ -50,6 +48,7 @@ NEAT121_DPV: dict = {
     "gene_reenable_prob": 0.0,  # mutate_gene_reenable_prob
     "conn_add_recurrence": True,  # Genome::mutate_add_link chooses recurrent or not ...
     "recur_only_prob": 0.0,  # ... recurrent with recur_only_prob
+    "conn_add_tries": 20,  # newlink_tries: 20 random pairs tried (since 2026-12-04; before, any free slot)
     "node_add_prob": 0.03,  # mutate_add_node_prob
     "conn_add_prob": 0.05,  # mutate_add_link_prob
     "mutation_exclusive": True,  # Species::reproduce: add node, else add link, else the rest
@@ -96,6 +95,7 @@ NEAT121_DPNV_PER_GENE: dict = {
     "weight_mutate_per_gene": True,
     "weight_mutate_rate": 0.5,
     "weight_replace_rate": 0.05,
+    "conn_add_tries": 0,  # new links among all free slots, as when it was picked
 }
 
 _VARIANTS = {"dpv": NEAT121_DPV, "dpnv": NEAT121_DPNV}

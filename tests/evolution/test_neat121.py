@@ -14,6 +14,7 @@ from evolution.crossover import crossover
 from evolution.kernels import breed as breed_kernel
 from evolution.kernels import select as select_kernel
 from evolution.mutate import (
+    add_connection_candidates,
     mutate_add_connection,
     mutate_add_node,
     mutate_toggle_enabled,
@@ -23,6 +24,7 @@ from evolution.mutate import (
 )
 from evolution.neat import NEAT
 from evolution.neat121 import NEAT121_DPNV, NEAT121_DPV, neat121_config
+from evolution.population import Genomes
 from evolution.reporters import BaseReporter
 from evolution.reproduce import reproduce, species_offspring
 from evolution.rng import RunRNG
@@ -341,6 +343,57 @@ def test_new_links_are_recurrent_or_not_as_drawn(recur):
     assert bool(rec[..., idx, idx].all())  # self-loops
 
 
+def _neat121_link_draws(cand, node, recurrent, tries, first_output, draws, seed):
+    """NEAT C++ 1.2.1's ``mutate_add_link`` loop written out (an independent reference): ``draws``
+    runs of up to ``tries`` tries on one genome, the slot each took (-1: none)."""
+    import random
+
+    rnd = random.Random(seed)
+    present = [i for i in range(len(node)) if node[i]]
+    targets = [j for j in present if j >= first_output]
+    out = []
+    for _ in range(draws):
+        took = -1
+        for _ in range(tries):
+            if recurrent and rnd.random() > 0.5:  # a loop: node1 = node2, a random non-sensor
+                i = j = rnd.choice(targets)
+            else:
+                i, j = rnd.choice(present), rnd.choice(targets)
+            if cand[i][j]:
+                took = i * len(node) + j
+                break
+        out.append(took)
+    return out
+
+
+@pytest.mark.parametrize("recur", [False, True])
+def test_new_links_are_drawn_as_neat_121s_tries_draw_them(recur):
+    from scipy.stats import chi2_contingency
+
+    cfg = small_config(pop_size=4000, max_hidden=6, conn_add_prob=1.0, conn_add_recurrence=True,
+                       recur_only_prob=1.0 if recur else 0.0, conn_add_tries=3)
+    g, _, everyone = _grown(cfg)
+    kinds = add_connection_candidates(g, cfg) & (recurrent_slots(g, cfg) == recur)
+    p = int(kinds.flatten(2).sum(-1)[0].argmax())  # the genome with the most free slots of the kind
+    one = Genomes(*(t[:, p:p + 1].expand(1, cfg.pop_size, *t.shape[2:]).clone() for t in g.tensors().values()))
+    drawn = torch.full((1, cfg.pop_size), recur)
+    out = mutate_add_connection(one, cfg, RunRNG([5]), everyone, recurrent=drawn)
+    new = (out.conn & ~one.conn).flatten(2)[0]
+    ours = torch.where(new.any(1), new.to(torch.int8).argmax(1), -1).tolist()
+    cand = add_connection_candidates(one, cfg)[0, 0] & (recurrent_slots(one, cfg)[0, 0] == recur)
+    ref = _neat121_link_draws(cand.tolist(), one.node[0, 0].tolist(), recur, 3, cfg.first_output, cfg.pop_size, 1)
+    slots = sorted(set(ours) | set(ref))
+    assert len(slots) >= 4 and -1 in ref  # several slots, and failures: 3 tries miss often
+    table = [[ours.count(s) for s in slots], [ref.count(s) for s in slots]]
+    assert chi2_contingency(table).pvalue > 1e-3, table
+    # the uniform pick among free slots is another distribution, which this test tells apart
+    uniform = mutate_add_connection(one, dataclasses.replace(cfg, conn_add_tries=0), RunRNG([5]), everyone,
+                                    recurrent=drawn)
+    new = (uniform.conn & ~one.conn).flatten(2)[0]
+    flat = torch.where(new.any(1), new.to(torch.int8).argmax(1), -1).tolist()
+    assert chi2_contingency([[flat.count(s) for s in slots], table[1]]).pvalue < 1e-6
+
+
 def test_one_gene_toggles_and_the_first_disabled_gene_comes_back():
     cfg = small_config(pop_size=300, max_hidden=6, toggle_enable_prob=1.0)
     g, rng, everyone = _grown(cfg, seed=2)
@@ -392,12 +445,14 @@ def test_the_presets_transcribe_the_two_parameter_files():
 
 @needs_kernel
 @pytest.mark.parametrize("variant", ["dpv", "dpnv"])
-def test_kernels_breed_the_reference_generations_under_the_presets(variant):
+@pytest.mark.parametrize("tries", [0, 20])
+def test_kernels_breed_the_reference_generations_under_the_presets(variant, tries):
     # A controller's layout (four inputs and a bias, recurrent), the preset's GA, populations
     # small enough to be quick; structure grows, species form, go stagnant and are penalised.
     cfg = neat121_config(variant, num_inputs=4, num_outputs=1, num_bias=1, max_hidden=12, pop_size=60,
                          node_add_prob=0.1, conn_add_prob=0.3, max_stagnation=3, population_stagnation=4,
-                         obliterate_interval=5, obliterate_min_age=3, compatibility_threshold=1.5)
+                         obliterate_interval=5, obliterate_min_age=3, compatibility_threshold=1.5,
+                         conn_add_tries=tries)
     g = torch.Generator().manual_seed(1)
     ref, fast = bred_on_both_paths(cfg, [5, 6], [
         (torch.rand(2, cfg.pop_size, generator=g, dtype=torch.float64) * (3 if k < 3 else 1),) for k in range(14)])
@@ -411,7 +466,8 @@ def test_kernels_breed_the_reference_generations_under_the_presets(variant):
     ("obliterate_min_age", 0), ("population_stagnation", -2), ("population_stagnation", 2.5),
     ("mutation_exclusive", 1), ("mate_only_prob", 1.1), ("crossover_average_prob", -0.5),
     ("weight_mutate_neatc", "yes"), ("recur_only_prob", 2.0), ("toggle_enable_prob", -1.0),
-    ("gene_reenable_prob", float("nan")), ("conn_add_recurrence", None),
+    ("gene_reenable_prob", float("nan")), ("conn_add_recurrence", None), ("conn_add_tries", -1),
+    ("conn_add_tries", 2.5),
 ])
 def test_bad_values_name_their_field(field, value):
     with pytest.raises(ConfigError, match=field):

@@ -143,7 +143,7 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
                   double s_max, double toggle_rate, int64_t row0, int64_t row1, uint64_t *gbits,  \
                   int64_t *gbefore, int64_t *gcount, int64_t *gtop, int exclusive,                \
                   double node_add_prob, int neatc, int recur_split, int one_on, double one_prob,   \
-                  double re_prob, int64_t first_hidden, double clone_link_prob) {                 \
+                  double re_prob, int64_t first_hidden, double clone_link_prob, int64_t conn_tries) {\
     const int64_t NN = N * N, W = (NN + 63) / 64;                                                 \
     const T mean = (T)w_mean, stdev = (T)w_stdev, lo = (T)w_min, hi = (T)w_max, power = (T)w_power;\
     const int64_t max_jobs = (row1 - row0) * (NN + 3);                                            \
@@ -224,10 +224,35 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
                 }                                                                                 \
                 cand[i] = m; n += __builtin_popcountll(m);                                        \
             }                                                                                     \
-            if (n > 0) {                                                                          \
+            int64_t s = -1;                                                                       \
+            if (n > 0 && conn_tries > 0) { /* [NEATC] tries: mutate.py's _pick_by_tries, op by op */\
+                const int loops = recur_split && want_rec;                                        \
+                const int64_t nn = __builtin_popcountll(nodes), nt = __builtin_popcountll(targets);\
+                int64_t total = 0;                                                                \
+                for (int64_t i = 0; i < N; ++i)                                                   \
+                    total += __builtin_popcountll(cand[i]) + (loops ? (int64_t)(cand[i] >> i & 1) * nn : 0);\
+                const int64_t pairs = nn * nt * (loops ? 2 : 1);                                  \
+                const double miss = 1.0 - (double)total / (double)(pairs > 1 ? pairs : 1);        \
+                double fail = 1.0;                                                                \
+                for (int64_t t = 0; t < conn_tries; ++t) fail = fail * miss;                      \
+                const double u = uniform01(key, b0 + blocks[B_CONN_PICK] + p);                    \
+                if (!(u < fail)) {                                                                \
+                    int64_t k = (int64_t)((u - fail) / (1.0 - fail) * (double)total);             \
+                    k = k > total - 1 ? total - 1 : (k < 0 ? 0 : k);                              \
+                    for (int64_t i = 0; i < N && s < 0; ++i)                                      \
+                        for (uint64_t m = cand[i]; m; m &= m - 1) {                               \
+                            const int64_t j = __builtin_ctzll(m);                                 \
+                            const int64_t share = 1 + (loops && j == i ? nn : 0);                 \
+                            if (k < share) { s = i * N + j; break; }                              \
+                            k -= share;                                                           \
+                        }                                                                         \
+                }                                                                                 \
+            } else if (n > 0) {                                                                   \
                 int64_t k = pick_k(uniform01(key, b0 + blocks[B_CONN_PICK] + p), n), i = 0;       \
                 while (k >= __builtin_popcountll(cand[i])) k -= __builtin_popcountll(cand[i++]);  \
-                const int64_t s = i * N + kth_bit(cand[i], k);                                    \
+                s = i * N + kth_bit(cand[i], k);                                                  \
+            }                                                                                     \
+            if (s >= 0) {                                                                         \
                 job_counter[n_jobs] = b0 + blocks[B_CONN_INIT] + 2 * p; job_row[n_jobs] = (int32_t)crow;\
                 job_slot[n_jobs] = (int32_t)s; job_kind[n_jobs++] = JOB_CONN;                     \
                 c[s] = 1; e[s] = 1; bits[s / 64] |= 1ULL << (s % 64);                            \
@@ -399,7 +424,8 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
                  const int64_t *r_pre, const int64_t *r_cnt, const int64_t *r_top, const T *r_w,  \
                  const T *r_sig, const uint8_t *r_alive, int64_t S, const double *coef, double thr,\
                  int64_t *nearest, int exclusive, int neatc, int recur_split, int one_on,         \
-                 double one_prob, double re_prob, double clone_link_prob, int threads) {          \
+                 double one_prob, double re_prob, double clone_link_prob, int64_t conn_tries,     \
+                 int threads) {                                                                   \
     const int64_t NN = N * N, words = (NN + 63) / 64;                                             \
     _Pragma("omp parallel for schedule(static) num_threads(threads)")                             \
     for (int64_t r = 0; r < R; ++r) {                                                             \
@@ -459,7 +485,7 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
                      first_output, feed_forward, per_gene, conn_add_prob, w_mean, w_stdev, w_min, w_max,\
                      w_rate, w_rate_sum, w_replace, w_power, s_rate, s_power, s_min, s_max, toggle_rate,\
                      row0, row1, gbits, gbefore, gcount, gtop, exclusive, node_add_prob, neatc,   \
-                     recur_split, one_on, one_prob, re_prob, first_hidden, clone_link_prob);      \
+                     recur_split, one_on, one_prob, re_prob, first_hidden, clone_link_prob, conn_tries);\
         if (nearest) { /* speciate's first step, while the run's children are in cache */         \
             const genes_##SFX cg = {gbits, gbefore, gcount, gtop, cw, cs, gmap};                  \
             const genes_##SFX rg = {r_bits, r_pre, r_cnt, r_top, r_w, r_sig, NULL};               \
