@@ -3,7 +3,7 @@
     python -m experiments.dpnv_fitness_starts --starts 16 --seeds 20
 
 Sigmoid NEAT (``--kind snn``: NEAT-SNN), the signed coding, NEAT C++ 1.2.1's test of a generation (the species champion)
-and the ``neat-1.2.1-dpnv-per-gene`` GA, on tuning seeds 5000 + i unless ``--first-seed``, with a budget of 100,000
+and the ``neat-1.2.1-dpnv-per-gene`` GA (``--ga``), on tuning seeds 5000 + i unless ``--first-seed``, with a budget of 100,000
 evaluations. The fitness of a genome is its mean damping fitness from the standard start and
 ``starts - 1`` fixed random starts, drawn uniformly within Gruau's ranges (seed 0), not from the
 625-start grid the generalisation test uses. Prints one JSON line: solved runs, evaluations as
@@ -57,6 +57,7 @@ def main(argv: list[str] | None = None) -> None:
                    help="NEAT-SNN: network time per control step (ms; default the plant's 20 ms)")
     p.add_argument("--spec", default="{}", help="JSON overrides of the controller spec")
     p.add_argument("--cfg", default="{}", help="JSON overrides of the NEAT config")
+    p.add_argument("--ga", default="neat-1.2.1-dpnv-per-gene", help="GA preset, or 'tuned' (the study's pick)")
     p.add_argument("--progress", type=int, default=0, help="print a line every N generations (0: none)")
     a = p.parse_args(argv)
     torch.set_num_threads(1)
@@ -67,8 +68,10 @@ def main(argv: list[str] | None = None) -> None:
     spec_overrides = json.loads(a.spec)
     if isinstance(spec_overrides.get("neuron"), str):  # a preset's name, e.g. "regular_spiking"
         spec_overrides["neuron"] = PRESETS[spec_overrides["neuron"]]
+    elif isinstance(spec_overrides.get("neuron"), dict):  # a, b, c, d (and v_peak) over the study's neuron
+        spec_overrides["neuron"] = study_spec("dpnv", a.kind, "signed").neuron._replace(**spec_overrides["neuron"])
     spec = replace(study_spec("dpnv", a.kind, "signed"), **spec_overrides)
-    cfg = study_config("dpnv", a.kind, ga="neat-1.2.1-dpnv-per-gene", coding="signed", **json.loads(a.cfg))
+    cfg = study_config("dpnv", a.kind, ga=a.ga, coding="signed", **json.loads(a.cfg))
     starts = damping_fitness_starts(task, a.starts)
     neat = NEAT(cfg, seeds=seeds)
     if a.progress:
@@ -93,7 +96,7 @@ def main(argv: list[str] | None = None) -> None:
             >= GENERALIZATION_STEPS).sum(-1)[:, 0]
     evals = neat121_counts(cfg.pop_size, neat.solved_generation.tolist(), neat.solved_position.tolist())
     solved = [e for e in evals if e is not None]
-    print(json.dumps({"kind": a.kind, "network_ms": a.network_ms, "spec": a.spec, "cfg": a.cfg,
+    print(json.dumps({"kind": a.kind, "ga": a.ga, "network_ms": a.network_ms, "spec": a.spec, "cfg": a.cfg,
                       "generations": generations, "starts": a.starts, "seeds": f"{seeds[0]}-{seeds[-1]}", "solved": f"{len(solved)}/{len(seeds)}",
                       "mean": round(statistics.mean(solved)) if solved else None,
                       "median": statistics.median(solved) if solved else None,

@@ -311,3 +311,16 @@ def test_the_neat121_ablation_runs_each_setting_and_compares_it_to_the_preset(ca
     lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert [row["setting"] for row in lines] == [n for n in ABLATIONS if "preset" in n or "exclusive" in n]
     assert lines[0]["solved"].endswith("/2") and lines[1]["p_vs_preset"] <= 1.0
+
+
+def test_the_multi_start_experiment_takes_either_controller_and_its_overrides(capsys):
+    from experiments.dpnv_fitness_starts import main as starts_main
+
+    starts_main(["--kind", "snn", "--seeds", "2", "--generations", "2", "--starts", "3", "--network-ms", "10",
+                 "--spec", '{"neuron": {"a": 0.01}, "i_background": 40.0}', "--cfg", '{"pop_size": 16}'])
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert (out["kind"], out["starts"], out["generations"], out["seeds"]) == ("snn", 3, 2, "5000-5001")
+    assert out["solved"] == "0/2" and len(out["best_long_steps"]) == len(out["best_held"]) == 2
+    assert all(0 < s < 100_000 for s in out["best_long_steps"])  # two generations of 16 balance briefly
+    with pytest.raises(ValueError, match="alpha"):  # a misspelt field of the neuron is an error, not ignored
+        starts_main(["--kind", "snn", "--seeds", "1", "--generations", "1", "--spec", '{"neuron": {"alpha": 1}}'])
