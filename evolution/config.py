@@ -166,6 +166,11 @@ class NEATConfig:
     # try fails. Sampled exactly from that distribution with one uniform. 0: uniformly among
     # the free slots of the kind.
     conn_add_tries: int = field(default=0, metadata=_range(0, None, integer=True))
+    # [NEATC] ``Species::reproduce``: each child joins the first species, in the order species
+    # were founded, whose representative is within the threshold, the representative being the
+    # species' champion of the parents' generation. Off: the closest representative, a random
+    # member ([NP], [NEAT02]).
+    speciate_neatc: bool = False
     # [NEATC] ``mutate_toggle_enable_prob`` (0.1 DPNV): one random gene (slot order) flips its
     # enabled flag, but is only disabled if its source keeps another enabled gene.
     toggle_enable_prob: float = field(default=0.0, metadata=_range(0, 1))

@@ -49,6 +49,7 @@ NEAT121_DPV: dict = {
     "conn_add_recurrence": True,  # Genome::mutate_add_link chooses recurrent or not ...
     "recur_only_prob": 0.0,  # ... recurrent with recur_only_prob
     "conn_add_tries": 20,  # newlink_tries: 20 random pairs tried (since 2026-12-04; before, any free slot)
+    "speciate_neatc": True,  # Species::reproduce: first fit against the champions (since 2026-12-04)
     "node_add_prob": 0.03,  # mutate_add_node_prob
     "conn_add_prob": 0.05,  # mutate_add_link_prob
     "mutation_exclusive": True,  # Species::reproduce: add node, else add link, else the rest
@@ -96,6 +97,7 @@ NEAT121_DPNV_PER_GENE: dict = {
     "weight_mutate_rate": 0.5,
     "weight_replace_rate": 0.05,
     "conn_add_tries": 0,  # new links among all free slots, as when it was picked
+    "speciate_neatc": False,  # the closest representative, a random member, as when it was picked
 }
 
 _VARIANTS = {"dpv": NEAT121_DPV, "dpnv": NEAT121_DPNV}

@@ -19,7 +19,7 @@ and the toggles' blocks are taken only when they are on.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import torch
 from torch import Tensor
@@ -232,6 +232,8 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
         sp, survivors, counts, delta = species_offspring(fitness, species, sp, cfg, generation)
         first, second, do_cross, elite = select_parents(fitness, species, survivors, counts, cfg, rng,
                                                         champions=delta)
+    if cfg.speciate_neatc:  # [NEATC]: the children are compared with their species' champions
+        sp = champion_representatives(g, fitness, species, sp, runs)
     active = ~elite
     # [NEATC] delta coding: the champions' clones (all but the last, copied as it is) get
     # weights (80 %) or a new link (20 %), nothing else
@@ -247,7 +249,7 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
         # The living representatives' genes: the node slots they hold, and each child's closest
         # one, which breeding finds (speciate's first step).
         rep_genes = breed_kernel.GeneBits(sp.rep_conn, sp.rep_weight, sp.rep_sigma, alive=sp.alive)
-        reps, reserved = (rep_genes, sp.rep_conn, sp.alive), breed_kernel.touched_nodes(rep_genes, sp.alive)
+        reps, reserved = (rep_genes, sp.rep_conn, sp.alive, sp.ident), breed_kernel.touched_nodes(rep_genes, sp.alive)
     else:
         reps, reserved = None, _rep_nodes(sp)
     if use_kernels:
@@ -293,6 +295,28 @@ def reproduce(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState, cf
     return children, elite, sp, info
 
 
+
+
+def champion_representatives(g: Genomes, fitness: Tensor, species: Tensor, sp: SpeciesState,
+                             runs: Tensor | None = None) -> SpeciesState:
+    """[NEATC]'s representatives: each living species' best member of the evaluated population
+    (the first on ties), its rows copied into ``sp.rep_*``; species without a member keep theirs.
+    ``runs``: ``g`` is a larger population and ``fitness``, ``species``, ``sp`` describe those runs."""
+    R, P = species.shape
+    S = sp.capacity
+    f = fitness.to(torch.float64)
+    best = torch.full((R, S), -torch.inf, dtype=torch.float64, device=f.device).scatter_reduce(1, species, f, "amax")
+    first = torch.where(f == best.gather(1, species), P - torch.arange(P, device=f.device), 0)
+    top = torch.zeros(R, S, dtype=torch.long, device=f.device).scatter_reduce(1, species, first, "amax")
+    has = sp.alive & (top > 0)
+    run_rows = torch.arange(R, device=f.device) if runs is None else runs.to(f.device)
+    rows = (run_rows.unsqueeze(1) * P + (P - top).clamp_max(P - 1)).flatten()
+    reps = {k: getattr(g, k).flatten(0, 1).index_select(0, rows).view(R, S, *getattr(g, k).shape[2:])
+            for k in ("conn", "weight", "sigma")}
+    keep = has.view(R, S, 1, 1)
+    return replace(sp, rep_conn=torch.where(keep, reps["conn"], sp.rep_conn),
+                   rep_weight=torch.where(keep, reps["weight"], sp.rep_weight),
+                   rep_sigma=torch.where(has, reps["sigma"], sp.rep_sigma))
 
 
 def extra_draws(cfg: NEATConfig, rng: RunRNG, P: int) -> dict[str, Tensor]:

@@ -4,7 +4,10 @@ Each run has ``S`` species slots (``S`` grows by doubling when a run needs more;
 species' slot is reused). A genome joins the compatible species whose representative is
 closest ([NP]'s rule); genomes compatible with none found new species one at a time, as
 in [NEAT02] (a loop over new species, not over genomes). Each species then takes a random
-member as its representative for the next generation ([NEAT02]).
+member as its representative for the next generation ([NEAT02]). With
+``NEATConfig.speciate_neatc``, NEAT C++ 1.2.1's rule: a genome joins the first compatible
+species in founding order, and the representatives are the species' champions of the
+parents' generation (set by ``reproduce``).
 """
 
 from __future__ import annotations
@@ -203,14 +206,20 @@ def _assign_by_tensors(g: Genomes, sp: SpeciesState, cfg: NEATConfig, generation
     n_alive = int(sp.alive.sum(1).max())
     if n_alive > 0:
         # Compare against living representatives only: their slots, packed to the front
-        # (in slot order, so ties still go to the lowest slot).
-        live = torch.argsort((~sp.alive).to(torch.int8), dim=1, stable=True)[:, :n_alive]
+        # (in slot order, so ties still go to the lowest slot; [NEATC]: oldest species first).
+        order = torch.where(sp.alive, sp.ident, torch.iinfo(torch.long).max) if cfg.speciate_neatc \
+            else (~sp.alive).to(torch.int8)
+        live = torch.argsort(order, dim=1, stable=True)[:, :n_alive]
         idx = live[..., None, None].expand(-1, -1, *sp.rep_conn.shape[2:])
         rep_stats = gene_stats(sp.rep_conn.gather(1, idx), sp.rep_weight.gather(1, idx), sp.rep_sigma.gather(1, live))
         d = distance(stats, rep_stats, cfg)
         d = torch.where(torch.gather(sp.alive, 1, live).unsqueeze(1), d, torch.full_like(d, torch.inf))
-        best_d, best_k = d.min(-1)
-        species = torch.where(best_d < thr, torch.gather(live, 1, best_k), species)
+        if cfg.speciate_neatc:  # [NEATC]: the first species within the threshold
+            best_k, found = _first_true(d < thr)
+            species = torch.where(found, torch.gather(live, 1, best_k), species)
+        else:
+            best_d, best_k = d.min(-1)
+            species = torch.where(best_d < thr, torch.gather(live, 1, best_k), species)
     # Genomes compatible with no species found new ones, in genome order as in [NEAT02]:
     # the first unassigned genome founds a species, every unassigned genome within the
     # threshold of it joins, and so on. Distances to the next FOUNDER_BATCH candidates are
@@ -264,10 +273,11 @@ def _assign_by_kernel(g: Genomes, sp: SpeciesState, cfg: NEATConfig, generation:
     near = genes.nearest_to
     if genes.nearest is not None and near[1] is sp.rep_conn and torch.equal(near[2], sp.alive):
         # breeding already found each genome's closest representative, of these ones
-        species, founded, n_founded = breed_kernel.assign_species(genes, near[0], sp.alive, cfg, genes.nearest)
+        species, founded, n_founded = breed_kernel.assign_species(genes, near[0], sp.alive, cfg, genes.nearest,
+                                                                  ident=sp.ident)
     else:
         reps = breed_kernel.GeneBits(sp.rep_conn, sp.rep_weight, sp.rep_sigma)
-        species, founded, n_founded = breed_kernel.assign_species(genes, reps, sp.alive, cfg)
+        species, founded, n_founded = breed_kernel.assign_species(genes, reps, sp.alive, cfg, ident=sp.ident)
     capacity = sp.capacity
     while capacity <= int(species.max()):  # grown by doubling, as _free_slot grows
         capacity *= 2

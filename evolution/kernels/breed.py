@@ -143,7 +143,7 @@ def _require(conn: Tensor, weight: Tensor) -> KernelLibrary:
 
 def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: Tensor, cfg: NEATConfig,
           rng: RunRNG, reserved: Tensor | None, *, runs: Tensor | None = None, in_place: bool = False,
-          reps: tuple[GeneBits, Tensor, Tensor] | None = None, average: Tensor | None = None,
+          reps: tuple[GeneBits, Tensor, Tensor, Tensor] | None = None, average: Tensor | None = None,
           severe: Tensor | None = None, recurrent: Tensor | None = None, clones: Tensor | None = None
           ) -> tuple[Genomes, Tensor, GeneBits]:
     """Children ``[R, P]`` of parents ``first`` / ``second`` (``[R, P]`` genome indices of
@@ -155,8 +155,8 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
     valid while the children are unchanged). ``runs[R]``: the parents are those runs of ``g``
     (a larger population), read in place; with ``in_place`` the children overwrite them (each
     run's parents are copied aside first) and ``g`` itself is returned. ``reps``: ``(bits,
-    rep_conn, alive)`` of the species representatives ``[R, S]``; each child's closest living
-    one within the threshold is then found as the run's children are written (speciate's first
+    rep_conn, alive, ident)`` of the species representatives ``[R, S]``; each child's closest
+    living one within the threshold (with ``cfg.speciate_neatc`` the first in ``ident`` order) is then found as the run's children are written (speciate's first
     step, while they are in cache), kept in the returned ``GeneBits`` for ``speciate``.
     ``average[R, P]``, ``severe[R, P]``, ``recurrent[R, P]``: [NEATC]'s averaging crossovers,
     severe weight mutations and recurrent new links (``reproduce.extra_draws``), as
@@ -200,8 +200,11 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
     genes = GeneBits.__new__(GeneBits)
     genes._bind(child.weight, child.sigma, dest)
     rep_args: list = [None] * 7 + [0, None, 0.0, None]  # reps' bits .. alive, S, coefficients, threshold, out
+    rep_ident = None
     if reps is not None:
-        rep_bits, rep_conn, alive = reps
+        rep_bits, rep_conn, alive, ident = reps
+        # [NEATC]'s first fit goes by the species' numbers; the closest rule needs none
+        rep_ident = ident.to(torch.int64).contiguous() if cfg.speciate_neatc else None
         genes.nearest = torch.empty(R, P, dtype=torch.int64)
         genes.nearest_to = (rep_bits, rep_conn, alive.clone())
         alive8, coef = alive.to(torch.uint8).contiguous(), _coefficients(cfg)
@@ -226,7 +229,7 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
         before.data_ptr(), count.data_ptr(), top.data_ptr(), None if genes.map is None else genes.map.data_ptr(),
         *rep_args, int(cfg.mutation_exclusive), int(cfg.weight_mutate_neatc), int(cfg.conn_add_recurrence),
         int(toggles_one(cfg)), float(cfg.toggle_enable_prob), float(cfg.gene_reenable_prob),
-        _clone_link_prob(cfg), int(cfg.conn_add_tries), threads)
+        _clone_link_prob(cfg), int(cfg.conn_add_tries), None if rep_ident is None else rep_ident.data_ptr(), threads)
     genes.bits, genes.before, genes.count, genes.top = bits, before, count, top
     return child, request.bool() & ~granted.bool(), genes
 
@@ -334,7 +337,7 @@ def _genes_args(g: GeneBits) -> list[int]:
 
 
 def assign_species(genes: GeneBits, reps: GeneBits, alive: Tensor, cfg: NEATConfig,
-                   nearest: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor]:
+                   nearest: Tensor | None = None, ident: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor]:
     """``speciate``'s assignment for genomes ``genes`` (``R x P`` rows) and representatives
     ``reps`` (``R x S`` rows, ``alive[R, S]``): the closest living representative within the
     threshold, else a new species founded in genome order (``evolution.speciate``).
@@ -342,7 +345,12 @@ def assign_species(genes: GeneBits, reps: GeneBits, alive: Tensor, cfg: NEATConf
     Returns ``(species [R, P], founded [R, P], n_founded [R])``: run ``r``'s new species are
     in slots ``founded[r, :n_founded[r]]``, in founding order; a slot >= S asks for growth.
     ``nearest[R, P]``: each genome's closest representative (-1: none), already found by
-    ``breed(..., reps=)``; only the founding is left."""
+    ``breed(..., reps=)``; only the founding is left. ``ident[R, S]`` (int64, with
+    ``cfg.speciate_neatc``): the species' numbers; a genome then joins the first species within
+    the threshold in that order ([NEATC]), not the closest."""
+    if cfg.speciate_neatc and ident is None:
+        raise ValueError("assign_species: cfg.speciate_neatc needs the species' numbers (ident=)")
+    ident = ident.to(torch.int64).contiguous() if cfg.speciate_neatc else None
     R, S = alive.shape
     P = genes.count.shape[0] // R
     species = torch.empty(R, P, dtype=torch.int64)
@@ -354,5 +362,7 @@ def assign_species(genes: GeneBits, reps: GeneBits, alive: Tensor, cfg: NEATConf
     getattr(_kernels(), f"assign_species_{_sfx(genes.weight.dtype)}")(
         *_genes_args(genes), *_genes_args(reps), alive8.data_ptr(), R, P, S, genes.nn, genes.words,
         coef.data_ptr(), float(cfg.compatibility_threshold), species.data_ptr(), founded.data_ptr(),
-        n_founded.data_ptr(), taken.data_ptr(), None if near is None else near.data_ptr(), torch.get_num_threads())
+        n_founded.data_ptr(), taken.data_ptr(), None if near is None else near.data_ptr(),
+        None if ident is None else ident.data_ptr(), torch.get_num_threads())
     return species, founded, n_founded
+

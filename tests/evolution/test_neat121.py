@@ -460,6 +460,50 @@ def test_kernels_breed_the_reference_generations_under_the_presets(variant, trie
     assert int(ref.genomes.conn.flatten(2).sum(-1).max()) >= 10  # long genomes: the tail rule ran
 
 
+# --- speciation: first fit against the champions ---------------------------------------
+@pytest.mark.parametrize("fused", [False, pytest.param(True, marks=needs_kernel)])
+def test_a_genome_joins_the_oldest_compatible_species_not_the_closest(fused):
+    cfg = small_config(pop_size=3, compatibility_threshold=3.0, compatibility_weight_coefficient=1.0)
+    g, rng = population(cfg, seeds=(0,))
+    sp = empty_species(1, cfg.num_nodes, 4, device=g.device, dtype=g.weight.dtype)
+    # two living species whose representatives are genome 0 with every weight shifted: slot 0,
+    # founded later (number 7), by 0.25; slot 1, founded first (number 3), by 1.0; both within
+    # the threshold, slot 0 the closer
+    sp.alive[0, :2] = True
+    sp.ident[0, :2] = torch.tensor([7, 3])
+    sp.next_id[0] = 8
+    for s, shift in ((0, 0.25), (1, 1.0)):
+        sp.rep_conn[0, s], sp.rep_sigma[0, s] = g.conn[0, 0], g.sigma[0, 0]
+        sp.rep_weight[0, s] = torch.where(g.conn[0, 0], g.weight[0, 0] + shift, 0.0)
+    closest, _ = speciate(g, sp, cfg, RunRNG([1]), 1, fused=fused)
+    first, _ = speciate(g, sp, dataclasses.replace(cfg, speciate_neatc=True), RunRNG([1]), 1, fused=fused)
+    assert int(closest[0, 0]) == 0 and int(first[0, 0]) == 1  # the closest, and the oldest within reach
+    far = dataclasses.replace(cfg, speciate_neatc=True)
+    sp.rep_weight[0, 1] = torch.where(g.conn[0, 0], g.weight[0, 0] + 5.0, 0.0)  # the old one out of reach
+    assert int(speciate(g, sp, far, RunRNG([1]), 1, fused=fused)[0][0, 0]) == 0
+
+
+def test_the_representatives_are_the_species_champions_of_the_evaluated_generation():
+    from evolution.reproduce import champion_representatives
+
+    cfg = small_config(pop_size=8, max_hidden=6, speciate_neatc=True)
+    g, _, _ = _grown(cfg)
+    species = torch.tensor([[0, 0, 1, 1, 1, 0, 2, 2]])
+    fitness = torch.tensor([[1.0, 3.0, 2.0, 2.0, 0.5, 3.0, -torch.inf, -torch.inf]])
+    sp = empty_species(1, cfg.num_nodes, 4, device=g.device, dtype=g.weight.dtype)
+    sp.alive[0, :3] = True
+    out = champion_representatives(g, fitness, species, sp)
+    for slot, champion in ((0, 1), (1, 2), (2, 6)):  # the best member, the first on ties
+        assert torch.equal(out.rep_conn[0, slot], g.conn[0, champion])
+        assert torch.equal(out.rep_weight[0, slot], g.weight[0, champion])
+        assert out.rep_sigma[0, slot] == g.sigma[0, champion]
+    assert not out.rep_conn[0, 3].any() and torch.equal(sp.rep_conn, torch.zeros_like(sp.rep_conn))  # pure
+    # runs=: g holds more runs than the others describe
+    two = Genomes(*(torch.cat([t, t.flip(1)]) for t in g.tensors().values()))
+    picked = champion_representatives(two, fitness, species, sp, runs=torch.tensor([1]))
+    assert torch.equal(picked.rep_weight[0, 0], g.weight[0, cfg.pop_size - 1 - 1])
+
+
 # --- validation ------------------------------------------------------------------------
 @pytest.mark.parametrize(("field", "value"), [
     ("stagnant_fitness_factor", -0.1), ("stagnant_fitness_factor", 1.5), ("obliterate_interval", -1),
@@ -467,7 +511,7 @@ def test_kernels_breed_the_reference_generations_under_the_presets(variant, trie
     ("mutation_exclusive", 1), ("mate_only_prob", 1.1), ("crossover_average_prob", -0.5),
     ("weight_mutate_neatc", "yes"), ("recur_only_prob", 2.0), ("toggle_enable_prob", -1.0),
     ("gene_reenable_prob", float("nan")), ("conn_add_recurrence", None), ("conn_add_tries", -1),
-    ("conn_add_tries", 2.5),
+    ("conn_add_tries", 2.5), ("speciate_neatc", 1),
 ])
 def test_bad_values_name_their_field(field, value):
     with pytest.raises(ConfigError, match=field):
@@ -482,8 +526,9 @@ def test_two_weight_rules_at_once_are_refused():
 # --- C against the tensor reference with every mechanism on ----------------------------
 @needs_kernel
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-def test_kernels_breed_the_reference_generations_with_the_mechanisms_on(dtype):
-    cfg = small_config(pop_size=50, max_hidden=6, node_add_prob=0.2, conn_add_prob=0.3, enabled_mutate_rate=0.05,
+@pytest.mark.parametrize("first_fit", [False, True])
+def test_kernels_breed_the_reference_generations_with_the_mechanisms_on(dtype, first_fit):
+    cfg = small_config(speciate_neatc=first_fit, pop_size=50, max_hidden=6, node_add_prob=0.2, conn_add_prob=0.3, enabled_mutate_rate=0.05,
                        compatibility_threshold=1.0, species_elitism=0, max_stagnation=3,
                        stagnant_fitness_factor=0.01, obliterate_interval=4, obliterate_min_age=2,
                        population_stagnation=3, mutation_exclusive=True, mate_only_prob=0.2,

@@ -343,12 +343,18 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
     free(job_counter);                                                                            \
 }                                                                                                 \
 /* The closest living representative of run r within thr for genome rows row0 .. row0 + P of  \
-   g (-1: none; first slot on ties): out[0 .. P). */                                            \
+   g (-1: none; first slot on ties): out[0 .. P). With ident (the species' numbers [R, S]):       \
+   [NEATC]'s rule instead, the first within thr in the order the species were founded. */        \
 static void nearest_reps_##SFX(genes_##SFX g, int64_t row0, int64_t P, genes_##SFX rep, const uint8_t *alive,\
                                int64_t r, int64_t S, int64_t NN, int64_t W, const double *coef, double thr,\
-                               int64_t *out) {                                                    \
+                               int64_t *out, const int64_t *ident) {                              \
     int64_t live[S > 0 ? S : 1], n_live = 0;                                                  \
     for (int64_t s = 0; s < S; ++s) if (alive[r * S + s]) live[n_live++] = s;                     \
+    if (ident) /* oldest first: insertion sort by species number (stable: slot order on ties) */  \
+        for (int64_t q = 1; q < n_live; ++q)                                                      \
+            for (int64_t k = q; k > 0 && ident[r * S + live[k - 1]] > ident[r * S + live[k]]; --k) { \
+                const int64_t t = live[k]; live[k] = live[k - 1]; live[k - 1] = t;                \
+            }                                                                                     \
     /* The living representatives, one array per field (and per bitset word), so that the       \
        terms of a genome against all of them are vector loops; pair_terms's arithmetic. */      \
     const int64_t L = n_live > 0 ? n_live : 1;                                                    \
@@ -393,6 +399,15 @@ static void nearest_reps_##SFX(genes_##SFX g, int64_t row0, int64_t P, genes_##S
                 sg[q] = coef[3] * fabs(sa - rsig[q]);                                             \
             }                                                                                     \
         }                                                                                         \
+        if (ident) { /* first fit: the weight term only where the rest is below thr */           \
+            out[p] = -1;                                                                          \
+            for (int64_t q = 0; q < n_live; ++q) {                                                \
+                if (st[q] + sg[q] >= thr) continue;                                               \
+                const terms_##SFX t = {st[q], sg[q], mt[q]};                                      \
+                if (pair_full_##SFX(g, ra, rep, r * S + live[q], NN, W, coef, t) < thr) { out[p] = live[q]; break; }\
+            }                                                                                     \
+            continue;                                                                             \
+        }                                                                                         \
         double best = INFINITY; int64_t bk = -1;                                                  \
         for (int64_t q = 0; q < n_live; ++q) {                                                    \
             const double bound = best < thr ? best : thr, partial = st[q] + sg[q];                \
@@ -425,7 +440,7 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
                  const T *r_sig, const uint8_t *r_alive, int64_t S, const double *coef, double thr,\
                  int64_t *nearest, int exclusive, int neatc, int recur_split, int one_on,         \
                  double one_prob, double re_prob, double clone_link_prob, int64_t conn_tries,     \
-                 int threads) {                                                                   \
+                 const int64_t *r_ident, int threads) {                                           \
     const int64_t NN = N * N, words = (NN + 63) / 64;                                             \
     _Pragma("omp parallel for schedule(static) num_threads(threads)")                             \
     for (int64_t r = 0; r < R; ++r) {                                                             \
@@ -489,7 +504,7 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
         if (nearest) { /* speciate's first step, while the run's children are in cache */         \
             const genes_##SFX cg = {gbits, gbefore, gcount, gtop, cw, cs, gmap};                  \
             const genes_##SFX rg = {r_bits, r_pre, r_cnt, r_top, r_w, r_sig, NULL};               \
-            nearest_reps_##SFX(cg, row0, P, rg, r_alive, r, S, NN, words, coef, thr, nearest + row0);\
+            nearest_reps_##SFX(cg, row0, P, rg, r_alive, r, S, NN, words, coef, thr, nearest + row0, r_ident);\
         }                                                                                         \
     }                                                                                             \
 }                                                                                                 \
@@ -505,7 +520,8 @@ void assign_species_##SFX(const uint64_t *g_bits, const int64_t *g_pre, const in
                           const uint8_t *alive,                                                   \
                           int64_t R, int64_t P, int64_t S, int64_t NN, int64_t W, const double *coef,\
                           double thr, int64_t *species, int64_t *founded, int64_t *n_founded,     \
-                          uint8_t *taken, const int64_t *nearest, int threads) {                  \
+                          uint8_t *taken, const int64_t *nearest, const int64_t *r_ident,         \
+                          int threads) {                                                          \
     const genes_##SFX g = {g_bits, g_pre, g_cnt, g_top, g_w, g_sig, g_map};                       \
     const genes_##SFX rep = {r_bits, r_pre, r_cnt, r_top, r_w, r_sig, r_map};                     \
     _Pragma("omp parallel for schedule(static) num_threads(threads)")                            \
@@ -514,7 +530,7 @@ void assign_species_##SFX(const uint64_t *g_bits, const int64_t *g_pre, const in
         uint8_t *tk = taken + r * (S + P);                                                        \
         memset(tk, 0, S + P);                                                                     \
         if (nearest) memcpy(sp, nearest + r * P, P * sizeof(int64_t)); /* found by breed_ */      \
-        else nearest_reps_##SFX(g, r * P, P, rep, alive, r, S, NN, W, coef, thr, sp);               \
+        else nearest_reps_##SFX(g, r * P, P, rep, alive, r, S, NN, W, coef, thr, sp, r_ident);      \
         for (int64_t p = 0; p < P; ++p) {                                                         \
             if (sp[p] >= 0) tk[sp[p]] = 1;                                                        \
         }                                                                                         \

@@ -22,7 +22,8 @@ void breed_f32(const float *pw, const uint8_t *pc, const uint8_t *pe, const uint
                const uint64_t *r_bits, const int64_t *r_pre, const int64_t *r_cnt, const int64_t *r_top,
                const float *r_w, const float *r_sig, const uint8_t *r_alive, int64_t S, const double *coef,
                double thr, int64_t *nearest, int exclusive, int neatc, int recur_split, int one_on,
-               double one_prob, double re_prob, double clone_link_prob, int64_t conn_tries, int threads);
+               double one_prob, double re_prob, double clone_link_prob, int64_t conn_tries,
+               const int64_t *r_ident, int threads);
 void breed_f64(const double *pw, const uint8_t *pc, const uint8_t *pe, const uint8_t *pn, const double *ps,
                const int64_t *a_idx, const int64_t *b_idx, const uint8_t *do_cross, const uint8_t *active,
                double *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, double *cs, int64_t *src, int64_t *dst,
@@ -36,7 +37,8 @@ void breed_f64(const double *pw, const uint8_t *pc, const uint8_t *pe, const uin
                const uint64_t *r_bits, const int64_t *r_pre, const int64_t *r_cnt, const int64_t *r_top,
                const double *r_w, const double *r_sig, const uint8_t *r_alive, int64_t S, const double *coef,
                double thr, int64_t *nearest, int exclusive, int neatc, int recur_split, int one_on,
-               double one_prob, double re_prob, double clone_link_prob, int64_t conn_tries, int threads);
+               double one_prob, double re_prob, double clone_link_prob, int64_t conn_tries,
+               const int64_t *r_ident, int threads);
 /* speciate's assignment: the closest living representative within thr, else found a species. */
 void assign_species_f32(const uint64_t *g_bits, const int64_t *g_pre, const int64_t *g_cnt,
                         const int64_t *g_top, const float *g_w, const float *g_sig, const int64_t *g_map,
@@ -44,14 +46,16 @@ void assign_species_f32(const uint64_t *g_bits, const int64_t *g_pre, const int6
                         const int64_t *r_top, const float *r_w, const float *r_sig, const int64_t *r_map,
                         const uint8_t *alive, int64_t R, int64_t P, int64_t S, int64_t NN, int64_t W,
                         const double *coef, double thr, int64_t *species, int64_t *founded,
-                        int64_t *n_founded, uint8_t *taken, const int64_t *nearest, int threads);
+                        int64_t *n_founded, uint8_t *taken, const int64_t *nearest,
+                        const int64_t *r_ident, int threads);
 void assign_species_f64(const uint64_t *g_bits, const int64_t *g_pre, const int64_t *g_cnt,
                         const int64_t *g_top, const double *g_w, const double *g_sig, const int64_t *g_map,
                         const uint64_t *r_bits, const int64_t *r_pre, const int64_t *r_cnt,
                         const int64_t *r_top, const double *r_w, const double *r_sig, const int64_t *r_map,
                         const uint8_t *alive, int64_t R, int64_t P, int64_t S, int64_t NN, int64_t W,
                         const double *coef, double thr, int64_t *species, int64_t *founded,
-                        int64_t *n_founded, uint8_t *taken, const int64_t *nearest, int threads);
+                        int64_t *n_founded, uint8_t *taken, const int64_t *nearest,
+                        const int64_t *r_ident, int threads);
 /* Gene bitsets, gene counts before each word, counts and highest slot of rows conn[M, NN]. */
 void gene_bits(const uint8_t *conn, const int64_t *rows, const uint8_t *alive, int64_t M, int64_t NN,
                int64_t W, uint64_t *bits, int64_t *before, int64_t *count, int64_t *top, int threads);
