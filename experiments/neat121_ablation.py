@@ -39,8 +39,7 @@ ABLATIONS: dict[str, tuple[dict, str, str]] = {
     "- no averaging crossover": ({"crossover_average_prob": 0.0}, "signed", "neat-1.2.1"),
     "- distance divided by gene count (N >= 20)": ({"compatibility_normalize_min_genes": 20}, "signed", "neat-1.2.1"),
     "- new links among all free slots, not by 20 tries": ({"conn_add_tries": 0}, "signed", "neat-1.2.1"),
-    "- closest random representative, not first fit against champions": ({"speciate_neatc": False}, "signed",
-                                                                          "neat-1.2.1"),
+    "+ first fit against champions (NEAT 1.2.1's speciation)": ({"speciate_neatc": True}, "signed", "neat-1.2.1"),
     "- the study's coding ([0, 1] over its bounds)": ({}, "study", "neat-1.2.1"),
     "the study's tuned GA, signed coding": ({}, "signed", "tuned"),
 }
