@@ -66,6 +66,11 @@ class NEATConfig:
     # --- connection genes -----------------------------------------------------------
     weight_init_mean: float = 0.0  # [NP]
     weight_init_stdev: float = field(default=1.0, metadata=_range(0, None))  # [NP]
+    # How a new weight is drawn (a start genome's, a new link's, a replaced one's), as [NP]'s
+    # ``weight_init_type``: False, Gaussian ``mean + stdev N(0, 1)``; True, uniform in
+    # ``[max(min, mean - 2 stdev), min(max, mean + 2 stdev)]`` ([NP]'s ``uniform``). [NEATC]
+    # draws its start and new-link weights uniform in +-1 (mean 0, stdev 0.5).
+    weight_init_uniform: bool = False
     weight_max_value: float = field(default=8.0, metadata=_range(0, None, lo_open=True))  # [NEATC]
     weight_min_value: float = -8.0  # [NEATC]
     # [NEAT02]: 80 % of genomes get weight mutations; each weight then is perturbed (90 %)
@@ -113,6 +118,10 @@ class NEATConfig:
 
     # --- reproduction ([Qiu19]: (150,150)-ES plus species elitism) ---------------------
     survival_threshold: float = field(default=0.2, metadata=_range(0, 1, lo_open=True))  # [Qiu19] best 20 %
+    # [NEATC] ``Species::adjust_fitness``: a species' best ``floor(survival_threshold * size + 1)``
+    # members are its parents (at most all), one more than ``ceil(survival_threshold * size)``
+    # whenever ``survival_threshold * size`` is whole. Off: ``ceil`` ([NP], at least one).
+    survival_neatc: bool = False
     # [Qiu19]: the champion of each species with more than 5 members is copied unchanged.
     # [NP] copies its ``elitism`` = 2 best of every species (``elitism_min_species_size`` 1).
     elitism: int = field(default=1, metadata=_range(0, None, integer=True))
@@ -166,6 +175,10 @@ class NEATConfig:
     # try fails. Sampled exactly from that distribution with one uniform. 0: uniformly among
     # the free slots of the kind.
     conn_add_tries: int = field(default=0, metadata=_range(0, None, integer=True))
+    # [NEATC] ``Genome::mutate_add_link`` with the generation's innovation list: a new link a
+    # genome of the same run already added this generation (the same slot, drawn as recurrent
+    # or not alike) takes that genome's weight, the first in child order. Off: each its own draw.
+    conn_add_shared_weight: bool = False
     # [NEATC] ``Species::reproduce``: each child joins the first species, in the order species
     # were founded, whose representative is within the threshold, the representative being the
     # species' champion of the parents' generation. Off: the closest representative, a random
@@ -250,6 +263,9 @@ class NEATConfig:
                                       "initial_hidden=... (a full_direct start) as an override instead")
                 if key in IGNORED_INI_KEYS:
                     continue
+                if key == "weight_init_type":  # [NP]'s spelling of weight_init_uniform
+                    values["weight_init_uniform"] = _parse_init_type(raw, f"{os.fspath(path)}: [{section}] {key}")
+                    continue
                 if key not in known:
                     raise ConfigError(f"{os.fspath(path)}: [{section}] {key} is not a NEATConfig field")
                 values[key] = _parse(known[key], raw, f"{os.fspath(path)}: [{section}] {key}")
@@ -277,7 +293,7 @@ IGNORED_INI_KEYS = {
     "response_min_value", "response_mutate_power", "response_mutate_rate", "response_replace_rate",
     "response_init_type", "conn_delete_prob", "node_delete_prob", "enabled_default",
     "enabled_rate_to_true_add", "enabled_rate_to_false_add", "single_structural_mutation",
-    "structural_mutation_surer", "weight_init_type", "species_fitness_func",
+    "structural_mutation_surer", "species_fitness_func",
     "min_species_size", "compatibility_disjoint_coefficient_nodes", "seed",
 }
 
@@ -300,6 +316,14 @@ def _parse(f: dataclasses.Field, raw: str, where: str):
         return float(text)
     except ValueError:
         raise ConfigError(f"{where} must be a number, got {raw!r}") from None
+
+
+def _parse_init_type(raw: str, where: str) -> bool:
+    """[NP]'s ``weight_init_type``: ``gaussian`` (or ``normal``) or ``uniform``; True for uniform."""
+    text = raw.strip().lower()
+    if text in ("gaussian", "normal", "uniform"):
+        return text == "uniform"
+    raise ConfigError(f"{where} must be gaussian, normal or uniform, got {raw!r}")
 
 
 def _describe(lo, hi, lo_open, hi_open) -> str:

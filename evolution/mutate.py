@@ -15,7 +15,7 @@ from torch import Tensor
 
 from evolution.config import NEATConfig
 from evolution.innovation import assign_split_nodes
-from evolution.population import Genomes, reachability
+from evolution.population import Genomes, new_weights, reachability
 from evolution.rng import RunRNG
 
 __all__ = [
@@ -58,7 +58,7 @@ def mutate_weights(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor, sev
     if cfg.weight_mutate_neatc:
         return _mutate_weights_neatc(g, cfg, active & genome_hit, u, rng.rand(P, N, N, 2, dtype=torch.float64),
                                      severe)
-    noise = rng.randn(P, N, N, dtype=g.weight.dtype)
+    noise, uniform = rng.randn_uniform(P, N, N, dtype=g.weight.dtype)
     if cfg.weight_mutate_per_gene:
         perturb = u < cfg.weight_mutate_rate
         replace = ~perturb & (u < cfg.weight_mutate_rate + cfg.weight_replace_rate)
@@ -66,9 +66,9 @@ def mutate_weights(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor, sev
     else:
         replace = u < cfg.weight_replace_rate
         gene_hit = _bcast(active & genome_hit, g.weight)
-    fresh = cfg.weight_init_mean + cfg.weight_init_stdev * noise
+    fresh = new_weights(cfg, noise, uniform)
     perturbed = g.weight + cfg.weight_mutate_power * noise
-    new = torch.where(replace, fresh, perturbed).clamp(cfg.weight_min_value, cfg.weight_max_value)
+    new = torch.where(replace, fresh, perturbed.clamp(cfg.weight_min_value, cfg.weight_max_value))
     hit = gene_hit & g.conn
     return Genomes(torch.where(hit, new, g.weight), g.conn, g.enabled, g.node, g.sigma)
 
@@ -223,8 +223,7 @@ def mutate_add_connection(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tens
     P = g.pop_size
     want = active & (rng.rand(P, dtype=torch.float64) < (cfg.conn_add_prob if prob is None else prob))
     pick = rng.rand(P, dtype=torch.float64)
-    init = cfg.weight_init_mean + cfg.weight_init_stdev * rng.randn(P, dtype=g.weight.dtype)
-    init = init.clamp(cfg.weight_min_value, cfg.weight_max_value)
+    init = new_weights(cfg, *rng.randn_uniform(P, dtype=g.weight.dtype))
     rows = torch.nonzero(_flat(want)).squeeze(1)
     if rows.numel() == 0:
         return (g, want) if return_wanted else g
@@ -241,12 +240,25 @@ def mutate_add_connection(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tens
     else:
         src, dst, possible = _pick_for(cand, _flat(pick)[rows])
     rows, src, dst = rows[possible], src[possible], dst[possible]
+    values = _flat(init)[rows]
+    if cfg.conn_add_shared_weight:
+        values = values[_first_of_each_link(rows // P, loops[possible], src, dst, g.num_nodes)]
     weight, conn, enabled = g.weight.clone(), g.conn.clone(), g.enabled.clone()
-    _flat(weight)[rows, src, dst] = _flat(init)[rows]
+    _flat(weight)[rows, src, dst] = values
     _flat(conn)[rows, src, dst] = True
     _flat(enabled)[rows, src, dst] = True
     out = Genomes(weight, conn, enabled, g.node, g.sigma)
     return (out, want) if return_wanted else out
+
+
+def _first_of_each_link(run: Tensor, recurrent: Tensor, src: Tensor, dst: Tensor, N: int) -> Tensor:
+    """For new links in child order, the position of the first one with the same run, slot and
+    recurrent flag: [NEATC]'s innovation list gives a later one that first one's weight."""
+    key = ((run * 2 + recurrent.long()) * N + src) * N + dst
+    _, group = torch.unique(key, return_inverse=True)
+    position = torch.arange(key.numel(), device=key.device)
+    first = torch.full((int(group.max()) + 1 if key.numel() else 0,), key.numel(), device=key.device)
+    return first.scatter_reduce(0, group, position, reduce="amin")[group]
 
 
 def mutate_add_node(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor,

@@ -363,8 +363,8 @@ class NEAT:
                 return f"{key} should be {shape} {dtype} for its {R} runs of {P} genomes, got {got}"
         if S < 1:
             return "species_state has no species slots"
-        if self.generation < 0:
-            return f"generation is {self.generation}"
+        if not 0 <= self.generation < 2**62:  # compared with int64 tensors below
+            return f"generation is {self.generation}, not in [0, 2**62)"
         if bool(((self.species < 0) | (self.species >= S)).any()):
             return f"species holds a slot outside [0, {S})"
         if bool(((self.solved_generation < -1) | (self.solved_generation > self.generation)).any()):

@@ -9,10 +9,12 @@ Where the presets only approximate NEAT 1.2.1 (``NEATConfig`` has no option for 
   ``mutate_toggle_enable`` picks and the first disabled gene ``mutate_gene_reenable`` enables.
 - delta coding when a run has a single species: NEAT 1.2.1 gives it ``pop - pop // 2``
   offspring (the population shrinks), ours all of them.
-- parents per species ``floor(survival_thresh * size + 1)`` (ours ``ceil(survival * size)``),
-  a new link's weight uniform in +-1 (ours ``weight_init_*``), the interspecies mate a
-  species champion (ours any species' parent), and the stagnation clock read before this
-  generation's improvement (ours after: a species improving just then is not penalised).
+- the interspecies mate a species champion (ours any species' parent), and the stagnation
+  clock read before this generation's improvement (ours after: a species improving just then
+  is not penalised).
+- ``mutation_num``: NEAT 1.2.1's compatibility distance reads each gene's weight as of its
+  genome's last weight mutation, and 0 for genes made since by a new node or by a link that
+  another genome added first this generation; ours reads the weights.
 - ``mate_only_prob``: NEAT 1.2.1 still mutates a child of two identical genomes.
 - speciation: NEAT 1.2.1 puts a child into the first species (oldest first) whose champion of
   the parents' generation is within the threshold; the presets keep the closest random
@@ -42,9 +44,16 @@ NEAT121_DPV: dict = {
     # Genome::compatibility sums, never divides by the gene count
     "compatibility_normalize_min_genes": 1_000_000_000,
     "survival_threshold": 0.2,  # survival_thresh
+    "survival_neatc": True,  # Species::adjust_fitness keeps floor(survival_thresh * size + 1) parents
     "crossover_prob": 0.75,  # 1 - mutate_only_prob (0.25)
     "weight_mutate_rate": 0.9,  # mutate_link_weights_prob
     "weight_mutate_neatc": True,  # Genome::mutate_link_weights (uniform steps, "severe" genomes)
+    # Population::spawn draws the start weights, Genome::mutate_add_link a new link's, uniform in +-1
+    "weight_init_uniform": True,
+    "weight_init_stdev": 0.5,  # uniform in mean +- 2 stdev
+    # mutate_add_link looks the link up in the generation's innovation list: a run adding the same
+    # link twice in one generation gives both the first one's weight
+    "conn_add_shared_weight": True,
     "weight_min_value": -8.0,  # mutate_link_weights caps weights at -8 ...
     "weight_max_value": 8.0,  # ... and +8
     "enabled_mutate_rate": 0.0,  # NEAT 1.2.1 toggles genes one per child, below
@@ -103,6 +112,10 @@ NEAT121_DPNV_PER_GENE: dict = {
     "weight_mutate_rate": 0.5,
     "weight_replace_rate": 0.05,
     "conn_add_tries": 0,  # new links among all free slots, as when it was picked
+    "weight_init_uniform": False,  # Gaussian new weights (stdev 1), as when it was picked
+    "weight_init_stdev": 1.0,
+    "conn_add_shared_weight": False,  # each new link its own weight, as when it was picked
+    "survival_neatc": False,  # ceil(survival * size) parents, as when it was picked
 }
 
 _VARIANTS = {"dpv": NEAT121_DPV, "dpnv": NEAT121_DPNV}

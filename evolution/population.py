@@ -134,6 +134,22 @@ def _fixed_nodes(config: NEATConfig, device: torch.device) -> Tensor:
     return fixed
 
 
+def new_weights(config: NEATConfig, normal: Tensor | None, uniform: Tensor | None) -> Tensor:
+    """New connection weights (a start genome's, a new link's, a replaced one's) from standard
+    normal draws ``normal`` or, with ``config.weight_init_uniform``, from uniform [0, 1) draws
+    ``uniform`` (float64): ``weight_init_mean + weight_init_stdev * normal``, or uniform in
+    ``[max(min, mean - 2 stdev), min(max, mean + 2 stdev)]`` as neat-python draws it (computed in
+    float64, then rounded to ``normal``'s dtype where given); clamped to the weight range. The
+    breeding kernel (breed.c) computes the same bits."""
+    if config.weight_init_uniform:
+        lo = max(config.weight_min_value, config.weight_init_mean - 2.0 * config.weight_init_stdev)
+        hi = min(config.weight_max_value, config.weight_init_mean + 2.0 * config.weight_init_stdev)
+        weight = (lo + (hi - lo) * uniform).to(uniform.dtype if normal is None else normal.dtype)
+    else:
+        weight = config.weight_init_mean + config.weight_init_stdev * normal
+    return weight.clamp(config.weight_min_value, config.weight_max_value)
+
+
 def initial_genomes(config: NEATConfig, rng: RunRNG, *, dtype: torch.dtype = torch.float32) -> Genomes:
     """The start population: every input (and bias) wired to every output, random weights.
 
@@ -154,8 +170,7 @@ def initial_genomes(config: NEATConfig, rng: RunRNG, *, dtype: torch.dtype = tor
         outs = torch.arange(config.first_output, config.first_hidden, device=device)
         template[outs, outs] = True
     conn = template.expand(R, P, N, N).clone()
-    weight = config.weight_init_mean + config.weight_init_stdev * rng.randn(P, N, N, dtype=dtype)
-    weight = torch.where(conn, weight.clamp(config.weight_min_value, config.weight_max_value), 0.0)
+    weight = torch.where(conn, new_weights(config, *rng.randn_uniform(P, N, N, dtype=dtype)), 0.0)
     start_nodes = _fixed_nodes(config, device)
     start_nodes[config.first_hidden:hidden_end] = True
     node = start_nodes.expand(R, P, N).clone()
@@ -170,7 +185,7 @@ def random_genomes(config: NEATConfig, *, runs: int = 1, hidden: int = 0, densit
     for benchmarks, tests and the curious: each has the first ``hidden`` hidden slots, and each
     possible gene between its nodes (none into inputs or bias; cycles and self-loops unless
     ``config.feed_forward``) exists with probability ``density``, enabled, with a weight drawn as
-    the start population's (``weight_init_mean + weight_init_stdev * N(0, 1)``, clamped); sigma
+    the start population's (``new_weights``); sigma
     as the start population's. Drawn from a CPU generator seeded by ``seed``: the same genomes
     on every device."""
     for name, value, ok in (("runs", runs, isinstance(runs, int) and runs >= 1),
@@ -190,9 +205,11 @@ def random_genomes(config: NEATConfig, *, runs: int = 1, hidden: int = 0, densit
         rank = torch.where((slot >= config.first_output) & (slot < config.first_hidden), slot + N, slot)
         possible &= rank.unsqueeze(1) < rank.unsqueeze(0)
     conn = (torch.rand(R, P, N, N, generator=generator, dtype=torch.float64) < density) & possible
-    weight = config.weight_init_mean + config.weight_init_stdev * torch.randn(R, P, N, N, generator=generator,
-                                                                                dtype=torch.float64)
-    weight = torch.where(conn, weight.clamp(config.weight_min_value, config.weight_max_value), 0.0)
+    if config.weight_init_uniform:
+        weight = new_weights(config, None, torch.rand(R, P, N, N, generator=generator, dtype=torch.float64))
+    else:
+        weight = new_weights(config, torch.randn(R, P, N, N, generator=generator, dtype=torch.float64), None)
+    weight = torch.where(conn, weight, 0.0)
     sigma = config.sigma_init_mean + config.sigma_init_stdev * torch.randn(R, P, generator=generator,
                                                                              dtype=torch.float64)
     sigma = sigma.clamp(config.sigma_min_value, config.sigma_max_value)

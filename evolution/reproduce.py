@@ -332,6 +332,15 @@ def extra_draws(cfg: NEATConfig, rng: RunRNG, P: int) -> dict[str, Tensor]:
     return {name: u[:, k] for k, name in enumerate(names)}
 
 
+def _parents_per_species(size: Tensor, cfg: NEATConfig) -> Tensor:
+    """Parents of species of ``size`` members (long): [NEATC] ``floor(s * size + 1)`` (at most
+    ``size``), computed in float64 as NEAT 1.2.1 does, or ``ceil(s * size)`` (at least 1) in
+    float32, as a long tensor times a Python float is."""
+    if cfg.survival_neatc:
+        return torch.minimum(torch.floor(size.double() * cfg.survival_threshold + 1.0).long(), size)
+    return torch.ceil(cfg.survival_threshold * size).long().clamp_min(1)
+
+
 def select_parents(fitness: Tensor, species: Tensor, survivors: Tensor, counts: Tensor, cfg: NEATConfig,
                    rng: RunRNG, champions: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor, Tensor]:
     """Parents of every child, as tensor operations (``evolution.kernels.select`` computes the
@@ -349,7 +358,7 @@ def select_parents(fitness: Tensor, species: Tensor, survivors: Tensor, counts: 
     order = torch.gather(by_fit, 1, by_species)  # genome index at each sorted position
     size = torch.zeros(R, S + 1, dtype=torch.long, device=dev).scatter_add_(1, key_species, torch.ones_like(species))[:, :S]
     start = size.cumsum(1) - size
-    n_parents = torch.where(size > 0, torch.ceil(cfg.survival_threshold * size).long().clamp_min(1), 0)
+    n_parents = torch.where(size > 0, _parents_per_species(size, cfg), 0)
 
     # Offspring k of a run belongs to the species whose block of counts holds k.
     k = torch.arange(P, device=dev).expand(R, P).contiguous()

@@ -165,11 +165,17 @@ class RunRNG:
 
     def randn(self, *shape: int, dtype: torch.dtype = torch.float32) -> Tensor:
         """Standard normal draws of shape ``[R, *shape]``: ``box_muller`` in float64, rounded to ``dtype``."""
+        return self.randn_uniform(*shape, dtype=dtype)[0]
+
+    def randn_uniform(self, *shape: int, dtype: torch.dtype = torch.float32) -> tuple[Tensor, Tensor]:
+        """``randn``'s draws and, from the same counters, each one's first uniform (float64, ``[R, *shape]``):
+        the counters a draw takes do not depend on which of the two its caller uses."""
         count = math.prod(shape)
         c = self._counters(count, 2).view(len(self), count, 2)
         k = self.keys.view(-1, 1, 1)
         u = uniform01(k, c)
-        return box_muller(u[..., 0], u[..., 1]).to(dtype).view(len(self), *shape)
+        normal = box_muller(u[..., 0], u[..., 1]).to(dtype).view(len(self), *shape)
+        return normal, u[..., 0].reshape(len(self), *shape)
 
     def subset(self, runs: list[int]) -> RunRNG:
         """A view of some runs' streams (shared, not copied: draws advance them)."""

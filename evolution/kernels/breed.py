@@ -229,7 +229,8 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
         before.data_ptr(), count.data_ptr(), top.data_ptr(), None if genes.map is None else genes.map.data_ptr(),
         *rep_args, int(cfg.mutation_exclusive), int(cfg.weight_mutate_neatc), int(cfg.conn_add_recurrence),
         int(toggles_one(cfg)), float(cfg.toggle_enable_prob), float(cfg.gene_reenable_prob),
-        _clone_link_prob(cfg), int(cfg.conn_add_tries), None if rep_ident is None else rep_ident.data_ptr(), threads)
+        _clone_link_prob(cfg), int(cfg.conn_add_tries), None if rep_ident is None else rep_ident.data_ptr(),
+        int(cfg.weight_init_uniform), int(cfg.conn_add_shared_weight), threads)
     genes.bits, genes.before, genes.count, genes.top = bits, before, count, top
     return child, request.bool() & ~granted.bool(), genes
 

@@ -87,7 +87,8 @@ def select_parents(fitness: Tensor, species: Tensor, survivors: Tensor, counts: 
     keys = rng.keys.contiguous()
     champ = None if champions is None else champions.to(torch.uint8).contiguous()
     lib.select_parents(f.data_ptr(), sp.data_ptr(), sv.data_ptr(), cnt.data_ptr(), keys.data_ptr(),
-                       base.data_ptr(), R, P, S, float(cfg.survival_threshold), cfg.elitism,
+                       base.data_ptr(), R, P, S, float(cfg.survival_threshold), int(cfg.survival_neatc),
+                       cfg.elitism,
                        cfg.elitism_min_species_size, float(cfg.interspecies_crossover_prob),
                        float(cfg.crossover_prob), first.data_ptr(), second.data_ptr(), do_cross.data_ptr(),
                        elite.data_ptr(), None if champ is None else champ.data_ptr(), torch.get_num_threads())

@@ -89,6 +89,7 @@ NEAT121_OPTIONS = st.fixed_dictionaries({
     "recur_only_prob": st.sampled_from([0.0, 0.2, 1.0]),
     "toggle_enable_prob": st.sampled_from([0.0, 0.0, 0.1, 1.0]),
     "gene_reenable_prob": st.sampled_from([0.0, 0.0, 0.05, 1.0]),
+    "survival_neatc": st.booleans(),
 })
 
 
@@ -125,11 +126,12 @@ def test_kernel_matches_reference_on_small_populations(seed, feed_forward, node_
 @settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), pop=st.integers(2, 60), slots=st.integers(1, 9),
        survival=st.sampled_from([0.05, 0.1, 0.15, 0.2, 0.3, 0.7, 1.0]), elitism=st.integers(0, 3),
-       elitism_min=st.integers(1, 6), tied=st.booleans())
-def test_selection_kernel_equals_the_tensor_selection(seed, pop, slots, survival, elitism, elitism_min, tied):
+       elitism_min=st.integers(1, 6), tied=st.booleans(), neatc=st.booleans())
+def test_selection_kernel_equals_the_tensor_selection(seed, pop, slots, survival, elitism, elitism_min, tied, neatc):
     # Small species, dead and stagnant slots, tied fitness values (ties go by index) and
-    # survival thresholds whose float32 product with the size is rounded (0.3 * 10).
-    _check_selection(seed, pop, slots, survival, elitism, elitism_min, tied)
+    # survival thresholds whose float32 product with the size is rounded (0.3 * 10); with
+    # survival_neatc, NEAT 1.2.1's floor(s * size + 1) parents.
+    _check_selection(seed, pop, slots, survival, elitism, elitism_min, tied, neatc)
 
 
 @needs_kernel
@@ -139,9 +141,10 @@ def test_selection_kernel_equals_the_tensor_selection_in_large_runs(pop, tied):
     _check_selection(pop, pop, 7, 0.2, 1, 3, tied)
 
 
-def _check_selection(seed, pop, slots, survival, elitism, elitism_min, tied):
+def _check_selection(seed, pop, slots, survival, elitism, elitism_min, tied, neatc=False):
     cfg = dataclasses.replace(small_config(pop_size=pop), survival_threshold=survival, elitism=elitism,
-                              elitism_min_species_size=elitism_min, interspecies_crossover_prob=0.3)
+                              elitism_min_species_size=elitism_min, interspecies_crossover_prob=0.3,
+                              survival_neatc=neatc)
     g = torch.Generator().manual_seed(seed)
     R = 3
     species = torch.randint(0, slots, (R, pop), generator=g)

@@ -168,3 +168,10 @@ def test_truncated_or_flipped_checkpoint_bytes_raise_checkpoint_error(tmp_path, 
     (tmp_path / "bad.pt").write_bytes(bytes(raw))
     with pytest.raises(CheckpointError, match="bad.pt"):
         NEAT.restore(tmp_path / "bad.pt")
+
+
+def test_a_generation_past_int64_raises_checkpoint_error(tmp_path):
+    # found by the fuzz above: compared with the int64 solved generations, it overflowed in torch
+    path = atomic_torch_save({**STATE, "generation": 10**400}, tmp_path / "huge.pt")
+    with pytest.raises(CheckpointError, match="generation"):
+        NEAT.restore(path)

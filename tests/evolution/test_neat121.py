@@ -511,7 +511,7 @@ def test_the_representatives_are_the_species_champions_of_the_evaluated_generati
     ("mutation_exclusive", 1), ("mate_only_prob", 1.1), ("crossover_average_prob", -0.5),
     ("weight_mutate_neatc", "yes"), ("recur_only_prob", 2.0), ("toggle_enable_prob", -1.0),
     ("gene_reenable_prob", float("nan")), ("conn_add_recurrence", None), ("conn_add_tries", -1),
-    ("conn_add_tries", 2.5), ("speciate_neatc", 1),
+    ("conn_add_tries", 2.5), ("speciate_neatc", 1), ("weight_init_uniform", 1), ("conn_add_shared_weight", "yes"), ("survival_neatc", 0),
 ])
 def test_bad_values_name_their_field(field, value):
     with pytest.raises(ConfigError, match=field):
@@ -556,3 +556,137 @@ def test_the_c_draw_blocks_are_the_python_ones_in_order():
     assert names[-4:-1] == ["B_ONE_WANT", "B_ONE_PICK", "B_REENABLE"]
     starts, total = breed_kernel.breed_blocks(5, 3, small_config(toggle_enable_prob=0.1))
     assert len(starts) == len(python) and total == breed_kernel.breed_blocks(5, 3)[1] + 3 * 5
+
+
+# --- uniform initial weights ([NEATC]'s +-1, neat-python's weight_init_type) ------------
+def _new_weights_everywhere(cfg):
+    """Weights a start population draws, new links draw and per-gene replacements draw."""
+    g, rng = population(cfg, seeds=(0, 1))
+    start = g.weight[g.conn]
+    everyone = torch.ones(2, cfg.pop_size, dtype=torch.bool)
+    linked = mutate_add_connection(g, cfg, rng, everyone)
+    new_links = linked.weight[linked.conn & ~g.conn]
+    replaced = mutate_weights(g, dataclasses.replace(cfg, weight_replace_rate=1.0, weight_mutate_rate=0.0,
+                                                     weight_mutate_per_gene=True), rng, everyone)
+    return start, new_links, replaced.weight[g.conn]
+
+
+def test_uniform_initial_weights_fill_neat_pythons_bounds_where_gaussian_ones_spill_over():
+    cfg = small_config(num_inputs=4, pop_size=200, max_hidden=6, conn_add_prob=1.0, weight_init_stdev=0.5)
+    uniform = dataclasses.replace(cfg, weight_init_uniform=True)
+    for drawn in _new_weights_everywhere(uniform):
+        assert drawn.numel() > 150
+        assert float(drawn.min()) >= -1.0 and float(drawn.max()) < 1.0  # mean +- 2 stdev
+        assert float(drawn.min()) < -0.9 and float(drawn.max()) > 0.9
+        # flat, not bell-shaped: as many in the outer half as in the inner half
+        assert abs(float((drawn.abs() > 0.5).double().mean()) - 0.5) < 0.1
+    for drawn in _new_weights_everywhere(cfg):  # Gaussian with stdev 0.5: 5 % beyond +-1
+        assert float((drawn.abs() > 1.0).double().mean()) > 0.01
+    # the bounds are cut to [weight_min_value, weight_max_value]
+    narrow = dataclasses.replace(uniform, weight_init_mean=7.5, weight_init_stdev=1.0)
+    for drawn in _new_weights_everywhere(narrow):
+        assert float(drawn.min()) >= 5.5 and float(drawn.max()) <= 8.0 and float(drawn.max()) > 7.8
+
+
+def test_random_genomes_draw_uniform_weights_too():
+    from evolution.population import random_genomes
+
+    cfg = small_config(pop_size=50, weight_init_uniform=True, weight_init_mean=1.0, weight_init_stdev=0.25)
+    g = random_genomes(cfg, runs=2, hidden=2, density=0.8, seed=3)
+    w = g.weight[g.conn]
+    assert float(w.min()) >= 0.5 and float(w.max()) < 1.5 and float(w.max()) - float(w.min()) > 0.9
+
+
+def test_the_ini_weight_init_type_sets_weight_init_uniform(tmp_path):
+    path = tmp_path / "neat.ini"
+    for text, uniform in (("uniform", True), ("gaussian", False), ("Normal", False)):
+        path.write_text(f"[DefaultGenome]\nnum_inputs = 2\nnum_outputs = 1\nweight_init_type = {text}\n")
+        assert NEATConfig.from_ini(path).weight_init_uniform is uniform
+    path.write_text("[DefaultGenome]\nweight_init_type = cauchy\n")
+    with pytest.raises(ConfigError, match="weight_init_type must be gaussian, normal or uniform"):
+        NEATConfig.from_ini(path)
+    with pytest.raises(ConfigError, match="weight_init_uniform"):
+        NEATConfig(weight_init_uniform="uniform")
+
+
+@needs_kernel
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("per_gene", [False, True])
+def test_kernels_breed_the_reference_generations_with_uniform_initial_weights(dtype, per_gene):
+    cfg = small_config(pop_size=40, max_hidden=6, node_add_prob=0.2, conn_add_prob=0.5, weight_init_uniform=True,
+                       weight_init_stdev=0.5, weight_mutate_per_gene=per_gene, weight_replace_rate=0.3,
+                       compatibility_threshold=1.0)
+    g = torch.Generator().manual_seed(4)
+    ref, fast = bred_on_both_paths(cfg, [2, 9], [
+        (torch.rand(2, cfg.pop_size, generator=g, dtype=torch.float64),) for _ in range(8)], dtype=dtype)
+    assert_same_breeding(ref, fast)
+
+
+# --- a generation's new links share their weight ([NEATC]'s innovation list) -----------
+def test_a_link_added_again_in_the_same_generation_takes_the_first_ones_weight():
+    # The start genomes' only free slot is the output's self-loop: every genome adds it.
+    cfg = small_config(pop_size=12, max_hidden=0, conn_add_prob=1.0)
+    g, _ = population(cfg, seeds=(0, 1))
+    everyone = torch.ones(2, cfg.pop_size, dtype=torch.bool)
+    loop = (cfg.first_output, cfg.first_output)
+    own = mutate_add_connection(g, cfg, RunRNG([4, 5]), everyone).weight[..., loop[0], loop[1]]
+    shared_cfg = dataclasses.replace(cfg, conn_add_shared_weight=True)
+    shared = mutate_add_connection(g, shared_cfg, RunRNG([4, 5]), everyone).weight[..., loop[0], loop[1]]
+    assert own[0].unique().numel() == cfg.pop_size  # each its own draw
+    assert torch.equal(shared, own[:, :1].expand_as(own))  # the first child's draw, run by run
+    assert shared[0, 0] != shared[1, 0]
+    # only genomes that add the same slot share: two free slots, two weights per run
+    two = small_config(pop_size=40, max_hidden=1, conn_add_prob=1.0, conn_add_shared_weight=True)
+    g, _ = population(two, seeds=(3,))
+    g.node[..., two.first_hidden] = True  # a lone hidden node: more free slots
+    out = mutate_add_connection(g, two, RunRNG([6]), torch.ones(1, two.pop_size, dtype=torch.bool))
+    new = out.conn & ~g.conn
+    for slot in torch.nonzero(new.any(1)[0]):
+        weights = out.weight[0][:, slot[0], slot[1]][new[0][:, slot[0], slot[1]]]
+        assert weights.unique().numel() == 1
+    assert out.weight[0][new[0]].unique().numel() == int(new.any(1).sum()) > 1
+
+
+@needs_kernel
+@pytest.mark.parametrize("variant", ["dpv", "dpnv"])
+def test_kernels_breed_the_reference_generations_with_shared_link_weights(variant):
+    cfg = neat121_config(variant, num_inputs=4, num_outputs=1, num_bias=1, max_hidden=12, pop_size=60,
+                         node_add_prob=0.1, conn_add_prob=0.4, recur_only_prob=0.4, max_stagnation=3,
+                         population_stagnation=4, compatibility_threshold=1.5, conn_add_tries=20,
+                         conn_add_shared_weight=True)
+    g = torch.Generator().manual_seed(2)
+    ref, fast = bred_on_both_paths(cfg, [5, 6], [
+        (torch.rand(2, cfg.pop_size, generator=g, dtype=torch.float64),) for _ in range(10)])
+    assert_same_breeding(ref, fast)
+
+
+# --- parents per species: NEAT 1.2.1's floor(s * size + 1) -----------------------------
+@pytest.mark.parametrize("select", ["tensor", "kernel"])
+def test_neatc_survival_keeps_floor_s_size_plus_one_parents(select):
+    if select == "kernel" and not select_kernel.kernel_available():
+        pytest.skip("no C compiler: kernels unavailable")
+    from evolution.reproduce import select_parents
+    pick = select_parents if select == "tensor" else select_kernel.select_parents
+    runs, P = 64, 10  # one species of 10: 0.4 * 10 = 4 is whole, so floor(4 + 1) = 5 against ceil(4) = 4
+    fitness = torch.arange(P, 0, -1, dtype=torch.float64).expand(runs, P).contiguous()  # genome k ranks k
+    species = torch.zeros(runs, P, dtype=torch.long)
+    survivors = torch.ones(runs, 1, dtype=torch.bool)
+    counts = torch.full((runs, 1), P, dtype=torch.long)
+    parents = {}
+    for neatc in (False, True):
+        cfg = small_config(pop_size=P, survival_threshold=0.4, elitism=0, survival_neatc=neatc)
+        first, second, _, _ = pick(fitness, species, survivors, counts, cfg, RunRNG(list(range(runs))))
+        parents[neatc] = set(torch.cat([first, second]).flatten().tolist())
+    assert parents[False] == {0, 1, 2, 3}
+    assert parents[True] == {0, 1, 2, 3, 4}
+
+
+def test_neatc_survival_never_keeps_more_parents_than_members():
+    from evolution.reproduce import _parents_per_species
+    size = torch.tensor([1, 2, 3, 5, 10, 150])  # species with members (empty ones get none anyway)
+    neatc = _parents_per_species(size, small_config(survival_threshold=1.0, survival_neatc=True))
+    assert neatc.tolist() == size.tolist()  # floor(size + 1) capped at size
+    ours = _parents_per_species(size, small_config(survival_threshold=0.2))
+    assert ours.tolist() == [1, 1, 1, 1, 2, 30]
+    assert _parents_per_species(size, small_config(survival_threshold=0.2, survival_neatc=True)).tolist() == \
+        [1, 1, 1, 2, 3, 31]

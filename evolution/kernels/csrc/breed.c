@@ -143,10 +143,16 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
                   double s_max, double toggle_rate, int64_t row0, int64_t row1, uint64_t *gbits,  \
                   int64_t *gbefore, int64_t *gcount, int64_t *gtop, int exclusive,                \
                   double node_add_prob, int neatc, int recur_split, int one_on, double one_prob,   \
-                  double re_prob, int64_t first_hidden, double clone_link_prob, int64_t conn_tries) {\
+                  double re_prob, int64_t first_hidden, double clone_link_prob, int64_t conn_tries,\
+                  int w_uniform, int shared_link) {                                               \
     const int64_t NN = N * N, W = (NN + 63) / 64;                                                 \
     const T mean = (T)w_mean, stdev = (T)w_stdev, lo = (T)w_min, hi = (T)w_max, power = (T)w_power;\
+    /* weight_init_uniform: [NP]'s bounds, mean +- 2 stdev within [min, max], in double */       \
+    const double u_lo = fmax(w_min, w_mean - 2.0 * w_stdev), u_hi = fmin(w_max, w_mean + 2.0 * w_stdev);\
     const int64_t max_jobs = (row1 - row0) * (NN + 3);                                            \
+    /* conn_add_shared_weight: the run's first JOB_CONN of each slot (x2: drawn recurrent or not) */\
+    int64_t *first_link = shared_link ? malloc(2 * NN * sizeof(int64_t)) : NULL;                  \
+    if (first_link) for (int64_t f = 0; f < 2 * NN; ++f) first_link[f] = -1;                      \
     uint64_t *job_counter = malloc(max_jobs * (sizeof(uint64_t) + sizeof(double) + 2 * sizeof(int32_t) + 1));\
     double *job_z = (double *)(job_counter + max_jobs);                                           \
     int32_t *job_row = (int32_t *)(job_z + max_jobs), *job_slot = job_row + max_jobs;             \
@@ -254,6 +260,10 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
             }                                                                                     \
             if (s >= 0) {                                                                         \
                 job_counter[n_jobs] = b0 + blocks[B_CONN_INIT] + 2 * p; job_row[n_jobs] = (int32_t)crow;\
+                if (first_link) { /* a later one draws the first one's weight (its counter) */    \
+                    int64_t *first = first_link + (recur_split && want_rec) * NN + s;             \
+                    if (*first >= 0) job_counter[n_jobs] = job_counter[*first]; else *first = n_jobs;\
+                }                                                                                 \
                 job_slot[n_jobs] = (int32_t)s; job_kind[n_jobs++] = JOB_CONN;                     \
                 c[s] = 1; e[s] = 1; bits[s / 64] |= 1ULL << (s % 64);                            \
                 genes[n_genes++] = (int32_t)s;                                                    \
@@ -327,6 +337,7 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
         const T zt = (T)job_z[q];                                                                 \
         if (job_kind[q] == JOB_CONN) {                                                            \
             T init = zt * stdev; init = init + mean;                                              \
+            if (w_uniform) init = (T)(u_lo + (u_hi - u_lo) * uniform01(key, job_counter[q]));     \
             w[s] = clampT_##SFX(init, lo, hi);                                                    \
         } else if (job_kind[q] == JOB_SIGMA) {                                                    \
             T step = zt * (T)s_power;                                                             \
@@ -336,11 +347,12 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
             w[s] = clampT_##SFX(job_kind[q] == JOB_NC_PERTURB ? w[s] + step : step, lo, hi);       \
         } else {                                                                                  \
             T fresh = zt * stdev; fresh = fresh + mean;                                           \
+            if (w_uniform) fresh = (T)(u_lo + (u_hi - u_lo) * uniform01(key, job_counter[q]));    \
             T step = zt * power; T pert = w[s] + step;                                            \
             w[s] = clampT_##SFX(job_kind[q] == JOB_REPLACE ? fresh : pert, lo, hi);               \
         }                                                                                         \
     }                                                                                             \
-    free(job_counter);                                                                            \
+    free(job_counter); free(first_link);                                                          \
 }                                                                                                 \
 /* The closest living representative of run r within thr for genome rows row0 .. row0 + P of  \
    g (-1: none; first slot on ties): out[0 .. P). With ident (the species' numbers [R, S]):       \
@@ -440,7 +452,7 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
                  const T *r_sig, const uint8_t *r_alive, int64_t S, const double *coef, double thr,\
                  int64_t *nearest, int exclusive, int neatc, int recur_split, int one_on,         \
                  double one_prob, double re_prob, double clone_link_prob, int64_t conn_tries,     \
-                 const int64_t *r_ident, int threads) {                                           \
+                 const int64_t *r_ident, int w_uniform, int shared_link, int threads) {           \
     const int64_t NN = N * N, words = (NN + 63) / 64;                                             \
     _Pragma("omp parallel for schedule(static) num_threads(threads)")                             \
     for (int64_t r = 0; r < R; ++r) {                                                             \
@@ -500,7 +512,8 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
                      first_output, feed_forward, per_gene, conn_add_prob, w_mean, w_stdev, w_min, w_max,\
                      w_rate, w_rate_sum, w_replace, w_power, s_rate, s_power, s_min, s_max, toggle_rate,\
                      row0, row1, gbits, gbefore, gcount, gtop, exclusive, node_add_prob, neatc,   \
-                     recur_split, one_on, one_prob, re_prob, first_hidden, clone_link_prob, conn_tries);\
+                     recur_split, one_on, one_prob, re_prob, first_hidden, clone_link_prob, conn_tries,\
+                     w_uniform, shared_link);                                                     \
         if (nearest) { /* speciate's first step, while the run's children are in cache */         \
             const genes_##SFX cg = {gbits, gbefore, gcount, gtop, cw, cs, gmap};                  \
             const genes_##SFX rg = {r_bits, r_pre, r_cnt, r_top, r_w, r_sig, NULL};               \

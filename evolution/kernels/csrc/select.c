@@ -47,7 +47,7 @@ static inline int64_t pick_rank(double u, int64_t n) { /* (u * n).long().clamp_m
 /* reproduce's selection, run by run. survivors[R, S], counts[R, S] (offspring per slot). */
 void select_parents(const double *fitness, const int64_t *species, const uint8_t *survivors,
                     const int64_t *counts, const int64_t *keys, const int64_t *base, int64_t R, int64_t P,
-                    int64_t S, float survival, int64_t elitism, int64_t elitism_min, double inter_prob,
+                    int64_t S, double survival, int survival_neatc, int64_t elitism, int64_t elitism_min, double inter_prob,
                     double cross_prob, int64_t *first, int64_t *second, uint8_t *do_cross, uint8_t *elite,
                     const uint8_t *champions, int threads) {
     _Pragma("omp parallel for schedule(static) num_threads(threads)")
@@ -70,9 +70,12 @@ void select_parents(const double *fitness, const int64_t *species, const uint8_t
         at = 0;
         for (int64_t s = 0; s < S; ++s) {
             start[s] = at; at += size[s];
-            /* torch.ceil(survival * size): float32 arithmetic (a long tensor times a Python float) */
-            const int64_t n = (int64_t)ceilf((float)size[s] * survival);
-            npar[s] = size[s] > 0 ? (n < 1 ? 1 : n) : 0;
+            /* torch.ceil(survival * size): float32 arithmetic (a long tensor times a Python float);
+               [NEATC] floor(survival * size + 1) in double, at most the species */
+            const int64_t n = survival_neatc ? (int64_t)floor((double)size[s] * survival + 1.0)
+                                             : (int64_t)ceilf((float)size[s] * (float)survival);
+            const int64_t m = survival_neatc ? (n > size[s] ? size[s] : n) : (n < 1 ? 1 : n);
+            npar[s] = size[s] > 0 ? m : 0;
         }
         start[S] = 0; npar[S] = 0;
         int64_t n_parents = 0; /* every species' parents, in sorted order, for interspecies mating */

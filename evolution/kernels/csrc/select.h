@@ -9,7 +9,7 @@
 /* reproduce's selection: the parents of each child, crossover or not, the elites. */
 void select_parents(const double *fitness, const int64_t *species, const uint8_t *survivors,
                     const int64_t *counts, const int64_t *keys, const int64_t *base, int64_t R, int64_t P,
-                    int64_t S, float survival, int64_t elitism, int64_t elitism_min, double inter_prob,
+                    int64_t S, double survival, int survival_neatc, int64_t elitism, int64_t elitism_min, double inter_prob,
                     double cross_prob, int64_t *first, int64_t *second, uint8_t *do_cross, uint8_t *elite,
                     const uint8_t *champions, int threads);
 /* speciate's representatives: each species' member with the highest draw, its genes copied. */
