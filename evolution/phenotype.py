@@ -49,7 +49,7 @@ from snn_torch.functional.izhikevich import (
     izhikevich_init,
     izhikevich_run,
 )
-from snn_torch.functional.recurrent import RecurrentState
+from snn_torch.functional.recurrent import RecurrentState, SynapticState, synaptic_decay
 from snn_torch.kernels.network import RateControlKernel
 from snn_torch.modules.coding import (
     BangBang,
@@ -106,6 +106,10 @@ class SpikingSpec:
         synapse_kick_mv: mV jump of the postsynaptic membrane per presynaptic spike per unit
             weight (a current of ``w * kick / dt_ms`` for one substep, so it does not depend on
             dt; Izhikevich 2003's networks add ``w`` for one 1 ms step).
+        synapse_tau_ms: time constant (ms) of exponential (current-based) synapses: a spike's
+            charge, the same as above, arrives spread over about ``tau``, so a neuron also sees
+            a lagged copy of its input (memory across control steps). 0 (default): it arrives in
+            one substep. Above 0 the network runs the torch step, not the C kernels.
         encoder: ``"current"``: input node ``k`` gets ``i_input_max * x_k`` (mV/ms) on top of the
             background; ``"bernoulli"``: input nodes are spike sources firing with probability
             ``x_k * input_rate_max_hz * dt`` per substep, keyed by a hash of the genome.
@@ -133,6 +137,7 @@ class SpikingSpec:
     dt_ms: float = 0.5
     i_background: float = 30.0
     synapse_kick_mv: float = 1.0
+    synapse_tau_ms: float = 0.0
     encoder: str = "current"
     i_input_max: float = 60.0
     input_rate_max_hz: float = 1000.0
@@ -150,6 +155,10 @@ class SpikingSpec:
                              "probability is not negative): use 'push_pull'")
         check_dt(self.dt_ms)
         check_params(self.neuron)
+        try:
+            synaptic_decay(self.synapse_tau_ms, self.dt_ms)
+        except ValueError as exc:
+            raise ValueError(f"SpikingSpec.{exc}") from None
         for name in ("i_background", "i_input_max", "input_rate_max_hz", "synapse_kick_mv", "threshold"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
@@ -379,7 +388,7 @@ class SpikingState(NamedTuple):
     history, which has them second)."""
 
     network: Tensor  # [B] int64: the genome of each row
-    neurons: RecurrentState  # [B, n]
+    neurons: RecurrentState | SynapticState  # [B, n]
     window: RateWindowState  # history [W, B, n]
     w_out: Tensor  # [B, n, K]: weights into the output nodes
     sigma: Tensor  # [B]
@@ -406,7 +415,7 @@ class SpikingController(_Phenotype):
         self.substeps = spec.substeps(period_s)
         self.network = PopulationRecurrentIzhikevich(
             self.weight, self.mask, spec.neuron, i_background=spec.i_background, synapse_kick_mv=spec.synapse_kick_mv,
-            dt_ms=spec.dt_ms, backend=backend)
+            synapse_tau_ms=spec.synapse_tau_ms, dt_ms=spec.dt_ms, backend=backend)
         n = self.num_local
         w_plain = torch.where(self.mask, self.weight, torch.zeros((), dtype=self.weight.dtype, device=self.weight.device))
         self.w_out = w_plain[:, :, self.outputs]  # [G, n, K], the genomes' weights (not kick-scaled)
@@ -449,7 +458,7 @@ class SpikingController(_Phenotype):
 
     def select(self, state: SpikingState, keep: Tensor) -> SpikingState:
         """The state of rows ``keep`` (int64 indices), in that order."""
-        neurons = RecurrentState(*(t[keep] for t in state.neurons))
+        neurons = type(state.neurons)(*(t[keep] for t in state.neurons))
         window = RateWindowState(state.window.history[:, keep], state.window.steps)
         return SpikingState(state.network[keep], neurons, window, state.w_out[keep], state.sigma[keep],
                             None if state.keys is None else state.keys[keep])

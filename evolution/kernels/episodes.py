@@ -59,7 +59,7 @@ def _controller_supported(controller) -> bool:
         if controller.sigma.dtype != dtype:
             return False  # the torch decoder would promote; not worth a second kernel
         probe = controller.initial_state(torch.zeros(1, dtype=torch.int64))
-        return controller.network.path(probe.neurons) == "kernel"
+        return controller.network.path(probe.neurons, episodes=True) == "kernel"
     if isinstance(controller, SigmoidController):
         net = controller.network
         outputs = controller.outputs
@@ -101,7 +101,7 @@ def native_rollout(task: Task, controller, starts, *, episodes: int, max_steps: 
         spec, net = controller.spec, controller.network
         k = kernel_constants(controller, dtype)
         rows = torch.arange(B, dtype=torch.int64) // episodes
-        v, u, z = (t.contiguous() for t in controller.initial_state(rows).neurons)
+        v, u, z = (t.contiguous() for t in controller.initial_state(rows).neurons[:3])  # s starts at 0 in C
         keys = controller.keys.contiguous() if k.bernoulli else None
         sigma = controller.sigma.to(dtype).contiguous()
         p = net.p
@@ -110,7 +110,8 @@ def native_rollout(task: Task, controller, starts, *, episodes: int, max_steps: 
             k.iconst.data_ptr(), k.gain, None if keys is None else keys.data_ptr(), k.w_out.data_ptr(),
             None if k.rest is None else k.rest.data_ptr(), sigma.data_ptr(), controller.window.window,
             controller.window.period_s, controller.substeps, spec.dt_ms, p.a, p.b, p.c, p.d, p.v_peak,
-            DECODER_CODES[spec.decoder], controller.action_max, float(spec.threshold), settle, *outputs)
+            DECODER_CODES[spec.decoder], controller.action_max, float(spec.threshold), settle,
+            int(net.syn_decay is not None), 0.0 if net.syn_decay is None else net.syn_decay, *outputs)
     else:
         net, spec = controller.network, controller.spec
         w_eff = net.effective_weight(dtype).contiguous()

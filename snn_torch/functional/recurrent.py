@@ -18,6 +18,7 @@ several episodes per network.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import torch
@@ -38,6 +39,8 @@ from snn_torch.functional.threshold import SpikeFn, heaviside
 
 __all__ = [
     "RecurrentState",
+    "SynapticState",
+    "synaptic_decay",
     "masked_weights",
     "recurrent_init",
     "recurrent_izhikevich_step",
@@ -54,6 +57,40 @@ class RecurrentState(NamedTuple):
     v: Tensor
     u: Tensor
     z: Tensor
+
+
+class SynapticState(NamedTuple):
+    """``RecurrentState`` plus ``s`` (mV/ms), each neuron's synaptic current through exponential
+    synapses (a synaptic time constant, ``synaptic_decay``), each ``[P, ..., N]``."""
+
+    v: Tensor
+    u: Tensor
+    z: Tensor
+    s: Tensor
+
+
+def synaptic_decay(tau_ms: float, dt_ms: float) -> float | None:
+    """Per-step decay ``exp(-dt / tau)`` of exponential synapses of time constant ``tau_ms``
+    (ms); None for ``tau_ms`` 0 (instantaneous synapses: a spike's current lasts one step).
+
+    With a decay ``k`` the synaptic current follows ``s <- k s + (1 - k) W z``: a spike delivers
+    the same charge as an instantaneous synapse, spread over about ``tau_ms``, so the weights
+    keep their meaning and ``tau_ms`` -> 0 gives the instantaneous synapse back."""
+    if isinstance(tau_ms, bool) or not isinstance(tau_ms, (int, float)) or not math.isfinite(tau_ms) or tau_ms < 0:
+        raise ValueError(f"synapse_tau_ms must be a finite number >= 0 (ms), got {tau_ms!r}")
+    return None if tau_ms == 0 else math.exp(-float(dt_ms) / float(tau_ms))
+
+
+def _synaptic_input(state: RecurrentState | SynapticState, z_prev: Tensor, w_eff: Tensor,
+                    syn_decay: float | None) -> tuple[Tensor, Tensor | None]:
+    """The synaptic current into each neuron this step, and the new ``s`` (None without decay)."""
+    drive = ordered_synaptic_current(z_prev, w_eff)
+    if syn_decay is None:
+        return drive, None
+    if not isinstance(state, SynapticState):
+        raise ValueError("a synaptic time constant needs a SynapticState (the layer's initial_state makes one)")
+    s = state.s * syn_decay + (1.0 - syn_decay) * drive
+    return s, s
 
 
 def masked_weights(weight: Tensor, mask: Tensor) -> Tensor:
@@ -83,9 +120,13 @@ def recurrent_init(
     v0_mv: float = DEFAULT_V0_MV,
     device: torch.device | str | None = None,
     dtype: torch.dtype = torch.float32,
-) -> RecurrentState:
-    """Rest state for ``shape = (P, ..., N)``: ``v = v0_mv``, ``u = b v``, no spikes."""
+    synaptic: bool = False,
+) -> RecurrentState | SynapticState:
+    """Rest state for ``shape = (P, ..., N)``: ``v = v0_mv``, ``u = b v``, no spikes (and with
+    ``synaptic``, a ``SynapticState`` with no synaptic current)."""
     v, u = izhikevich_init(shape, p, v0_mv=v0_mv, device=device, dtype=dtype)
+    if synaptic:
+        return SynapticState(v, u, torch.zeros_like(v), torch.zeros_like(v))
     return RecurrentState(v, u, torch.zeros_like(v))
 
 
@@ -111,6 +152,7 @@ def recurrent_izhikevich_step(
     spike_fn: SpikeFn = heaviside,
     substep_reset: bool = True,
     validate: bool = True,
+    syn_decay: float | None = None,
 ) -> tuple[Tensor, RecurrentState]:
     """One step of ``P`` recurrent networks.
 
@@ -119,6 +161,8 @@ def recurrent_izhikevich_step(
         state: ``RecurrentState`` before the step.
         w_eff: effective weights ``[P, N, N]`` (pre x post), already masked
             (``masked_weights``), in the state's dtype.
+        syn_decay: ``synaptic_decay``'s per-step decay of exponential synapses (``state`` then
+            a ``SynapticState``); None: instantaneous synapses.
         Others as ``izhikevich_step``.
 
     Returns:
@@ -128,12 +172,13 @@ def recurrent_izhikevich_step(
         dt_ms = check_dt(dt_ms)
         _check_weights(w_eff, state.v)
         check_current("i_ext", i_ext, state.v)
-    i_total = i_ext + ordered_synaptic_current(state.z, w_eff)
+    drive, syn = _synaptic_input(state, state.z, w_eff, syn_decay)
+    i_total = i_ext + drive
     z, (v, u) = izhikevich_step(
         i_total, IzhikevichState(state.v, state.u), p, dt_ms=dt_ms, method=method,
         spike_fn=spike_fn, substep_reset=substep_reset, validate=False,
     )
-    return z, RecurrentState(v, u, z)
+    return z, (RecurrentState(v, u, z) if syn is None else SynapticState(v, u, z, syn))
 
 
 def _check_weights(w_eff: Tensor, v: Tensor) -> None:
@@ -159,6 +204,7 @@ def recurrent_izhikevich_run(
     spike_fn: SpikeFn = heaviside,
     substep_reset: bool = True,
     validate: bool = True,
+    syn_decay: float | None = None,
 ) -> tuple[Tensor, RecurrentState]:
     """Run ``T = i_ext.shape[0]`` steps; returns spikes ``[T, P, ..., N]`` and the last state.
 
@@ -179,7 +225,7 @@ def recurrent_izhikevich_run(
     for t in range(i_ext.shape[0]):
         z, state = recurrent_izhikevich_step(
             i_ext[t], state, w_eff, p, dt_ms=dt_ms, method=method, spike_fn=spike_fn,
-            substep_reset=substep_reset, validate=False,
+            substep_reset=substep_reset, validate=False, syn_decay=syn_decay,
         )
         spikes.append(z)
     if not spikes:
@@ -190,7 +236,7 @@ def recurrent_izhikevich_run(
 def recurrent_izhikevich_substep(
     i_ext: Tensor, state: RecurrentState, w_eff: Tensor, counts: Tensor, p: IzhikevichParams, *,
     dt_ms: float = DEFAULT_DT_MS, source: Tensor | None = None, method: str = DEFAULT_METHOD,
-    spike_fn: SpikeFn = heaviside, substep_reset: bool = True,
+    spike_fn: SpikeFn = heaviside, substep_reset: bool = True, syn_decay: float | None = None,
 ) -> tuple[RecurrentState, Tensor]:
     """One substep of ``recurrent_izhikevich_steps``, its spikes added to ``counts``.
 
@@ -202,7 +248,8 @@ def recurrent_izhikevich_substep(
     if n_src:
         source = source.to(z_prev.dtype)
         z_prev = torch.cat([source, z_prev[:, n_src:]], dim=1)
-    i_total = i_ext + ordered_synaptic_current(z_prev, w_eff)
+    drive, syn = _synaptic_input(state, z_prev, w_eff, syn_decay)
+    i_total = i_ext + drive
     z, (v, u) = izhikevich_step(
         i_total, IzhikevichState(state.v, state.u), p, dt_ms=dt_ms, method=method,
         spike_fn=spike_fn, substep_reset=substep_reset, validate=False,
@@ -211,7 +258,8 @@ def recurrent_izhikevich_substep(
         v = torch.cat([state.v[:, :n_src], v[:, n_src:]], dim=1)
         u = torch.cat([state.u[:, :n_src], u[:, n_src:]], dim=1)
         z = torch.cat([source, z[:, n_src:]], dim=1)
-    return RecurrentState(v, u, z), counts + z
+    new = RecurrentState(v, u, z) if syn is None else SynapticState(v, u, z, syn)
+    return new, counts + z
 
 
 def recurrent_izhikevich_steps(
@@ -226,6 +274,7 @@ def recurrent_izhikevich_steps(
     method: str = DEFAULT_METHOD,
     spike_fn: SpikeFn = heaviside,
     substep_reset: bool = True,
+    syn_decay: float | None = None,
 ) -> tuple[Tensor, RecurrentState]:
     """``substeps`` steps under a constant external current: one control step of ``P`` networks.
 
@@ -237,6 +286,8 @@ def recurrent_izhikevich_steps(
         source_spikes: ``[P, substeps, S]`` spikes (0 or 1) of spike-source nodes ``0 .. S-1``
             in each substep (e.g. Bernoulli-coded inputs): their ``z`` is set to these and their
             ``v`` and ``u`` are held. None: every node is a neuron.
+        syn_decay: exponential synapses' per-step decay (``synaptic_decay``; ``state`` a
+            ``SynapticState``), None: instantaneous synapses.
 
     Returns:
         ``(counts, state)``: spikes per node over the substeps ``[P, N]`` (sources included),
@@ -247,5 +298,6 @@ def recurrent_izhikevich_steps(
         state, counts = recurrent_izhikevich_substep(
             i_ext, state, w_eff, counts, p, dt_ms=dt_ms, method=method, spike_fn=spike_fn,
             substep_reset=substep_reset, source=None if source_spikes is None else source_spikes[:, q],
+            syn_decay=syn_decay,
         )
     return counts, state

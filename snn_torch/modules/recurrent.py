@@ -39,6 +39,7 @@ from snn_torch.functional.recurrent import (
     recurrent_init,
     recurrent_izhikevich_run,
     recurrent_izhikevich_steps,
+    synaptic_decay,
 )
 from snn_torch.functional.scalars import scalar
 from snn_torch.functional.threshold import SpikeFn, heaviside
@@ -154,6 +155,10 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
             ``j``'s current for one step. A number: the weights are in units of this kick, a
             spike moves the target's membrane by ``weight * synapse_kick_mv`` mV whatever
             ``dt_ms`` (current ``weight * synapse_kick_mv / dt_ms`` for one step).
+        synapse_tau_ms: time constant (ms) of exponential synapses: a spike's current decays as
+            ``exp(-t / tau)`` and carries the same charge as with 0 (the default: it lasts one
+            step). Above 0 the state is a ``SynapticState`` and ``control_step`` runs the torch
+            step (the C kernel and the compiled step carry no synaptic current yet).
         trainable: register ``weight`` as an ``nn.Parameter`` (else a buffer).
         spike_fn: spike function; default ``heaviside`` (evolution needs no gradient).
         backend: how ``control_step`` runs: ``"auto"`` (C kernel on the CPU where it applies,
@@ -172,6 +177,7 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
         *,
         i_background: float = 0.0,
         synapse_kick_mv: float | None = None,
+        synapse_tau_ms: float = 0.0,
         trainable: bool = False,
         dt_ms: float = DEFAULT_DT_MS,
         method: str = DEFAULT_METHOD,
@@ -189,6 +195,8 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
         self.i_background = float(i_background)
         self.synapse_kick_mv = synapse_kick_mv
         self.dt_ms = dt_ms
+        self.syn_decay = synaptic_decay(synapse_tau_ms, dt_ms)
+        self.synapse_tau_ms = float(synapse_tau_ms)
         check_method(method)
         self.method = method
         self.spike_fn = spike_fn if spike_fn is not None else heaviside
@@ -199,12 +207,15 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
         self._supported: dict[tuple, bool] = {}
 
     def initial_state(self, like: Tensor | tuple[int, ...]) -> RecurrentState:
-        """Rest state: ``v = v0_mv``, ``u = b v``, no spikes. ``like``: a tensor (its shape, dtype
-        and device) or a shape (the weights' dtype and device)."""
+        """Rest state: ``v = v0_mv``, ``u = b v``, no spikes (a ``SynapticState`` with no current
+        under a synaptic time constant). ``like``: a tensor (its shape, dtype and device) or a
+        shape (the weights' dtype and device)."""
+        synaptic = self.syn_decay is not None
         if isinstance(like, Tensor):
-            return recurrent_init(like.shape, self.p, v0_mv=self.v0_mv, device=like.device, dtype=like.dtype)
+            return recurrent_init(like.shape, self.p, v0_mv=self.v0_mv, device=like.device, dtype=like.dtype,
+                                  synaptic=synaptic)
         return recurrent_init(tuple(like), self.p, v0_mv=self.v0_mv, device=self.weight.device,
-                              dtype=self.weight.dtype)
+                              dtype=self.weight.dtype, synaptic=synaptic)
 
     def forward(self, i_ext: Tensor, state: RecurrentState | None = None) -> tuple[Tensor, RecurrentState]:
         if not isinstance(i_ext, Tensor) or i_ext.dim() < 3:
@@ -221,13 +232,15 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
             state = self.initial_state(i_ext[0])
         return recurrent_izhikevich_run(
             i_ext, state, w_eff, self.p, dt_ms=self.dt_ms, method=self.method,
-            spike_fn=self.spike_fn, substep_reset=self.substep_reset, validate=True,
+            spike_fn=self.spike_fn, substep_reset=self.substep_reset, validate=True, syn_decay=self.syn_decay,
         )
 
-    def path(self, state: RecurrentState) -> str:
-        """Which code ``control_step`` runs for ``state``: ``"kernel"``, ``"compiled"`` or ``"torch"``."""
+    def path(self, state: RecurrentState, *, episodes: bool = False) -> str:
+        """Which code ``control_step`` runs for ``state``: ``"kernel"``, ``"compiled"`` or ``"torch"``.
+        ``episodes``: which the whole-episode loop (``evolution.kernels.episodes``) may run,
+        whose C kernel also carries exponential synapses."""
         plain = (self.method == "heun" and self.substep_reset and self.spike_fn is heaviside
-                 and not self.weight.requires_grad)
+                 and not self.weight.requires_grad and (episodes or self.syn_decay is None))
         key = (state.v.device, state.v.dtype, state.v.dim(), state.v.shape[-1], plain)
         if self._supported.get(key) is None:
             self._supported[key] = plain and kernel_supports(state.v, self.p)
@@ -235,7 +248,11 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
             return "kernel"
         if self.backend == "kernel":
             raise ValueError("backend='kernel' needs CPU float32/64 state, N <= 64, scalar neuron parameters, "
-                             "Heun with the sub-step reset, heaviside spikes, no gradient and a C compiler")
+                             "Heun with the sub-step reset, heaviside spikes, no gradient, no synaptic time "
+                             "constant and a C compiler")
+        if self.backend == "compiled" and self.syn_decay is not None and not episodes:
+            raise ValueError("backend='compiled' carries no synaptic current: use 'auto' or 'torch' with "
+                             "synapse_tau_ms > 0")
         if plain and (self.backend == "compiled" or (self.backend == "auto" and state.v.device.type == "cuda")):
             return "compiled"
         return "torch"
@@ -274,7 +291,7 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
         path = self.path(state)
         if path == "kernel":
             w_eff = self.effective_weight(state.v.dtype)
-            if any(t.shape != i_ext.shape or t.dtype != i_ext.dtype for t in state):
+            if any(t.shape != i_ext.shape or t.dtype != i_ext.dtype for t in state):  # (v, u, z): no synapses
                 raise ValueError(f"state tensors must all be [{i_ext.shape[0]}, {self.num_neurons}] of {i_ext.dtype}")
             return network_steps_kernel(i_ext, state, w_eff, self.p, dt_ms=self.dt_ms, substeps=substeps,
                                         network=network, source_spikes=source_spikes, inplace=inplace, trusted=True)
@@ -291,11 +308,12 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
             return counts, state
         return recurrent_izhikevich_steps(i_ext, state, w, self.p, substeps=substeps, dt_ms=self.dt_ms,
                                           source_spikes=source_spikes, method=self.method, spike_fn=self.spike_fn,
-                                          substep_reset=self.substep_reset)
+                                          substep_reset=self.substep_reset, syn_decay=self.syn_decay)
 
     def extra_repr(self) -> str:
         return (f"P={self.num_networks}, N={self.num_neurons}, p={tuple(self.p)}, dt_ms={self.dt_ms}, "
-                f"i_background={self.i_background}, synapse_kick_mv={self.synapse_kick_mv}, backend={self.backend!r}")
+                f"i_background={self.i_background}, synapse_kick_mv={self.synapse_kick_mv}, "
+                f"synapse_tau_ms={self.synapse_tau_ms}, backend={self.backend!r}")
 
 
 class PopulationRecurrentSigmoid(_PopulationNetwork):

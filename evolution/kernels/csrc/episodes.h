@@ -26,7 +26,8 @@
    period_s each), the neuron and substeps; decoder 0: sigmoid force, 1: bang-bang at threshold,
    2: linear, clamped to +-action_max. settle > 0 (both controllers): each control step is
    evolution.ablation.StaticMapController's memoryless map, `settle` control steps from rest on
-   the observation, the last one's action. */
+   the observation, the last one's action. syn != 0: exponential synapses, the synaptic current
+   decaying by syn_k per substep (snn_torch.functional.recurrent.synaptic_decay), 0 at rest. */
 int64_t episodes_spiking_f32(const void *step_fn, const void *observe_fn, const double *plant_params,
                              int64_t plant_bytes, int64_t width, const void *starts, int64_t start_rows, int64_t episodes,
                              int64_t n_obs, int64_t n_act, int64_t max_steps, const float *offset, const float *scale, int64_t coding, int64_t clip, int64_t n_in,
@@ -34,8 +35,9 @@ int64_t episodes_spiking_f32(const void *step_fn, const void *observe_fn, const 
                              const float *iconst, float gain, const int64_t *keys, const float *w_out,
                              const float *rest, const float *sigma, int64_t window, double period_s,
                              int64_t substeps, float dt, float a, float b, float c, float d, float vpeak,
-                             int64_t decoder, double action_max, double threshold, int64_t settle, int64_t rows,
-                             double *returns, int64_t *steps, int64_t *error, int threads);
+                             int64_t decoder, double action_max, double threshold, int64_t settle, int64_t syn,
+                             double syn_k, int64_t rows, double *returns, int64_t *steps, int64_t *error,
+                             int threads);
 int64_t episodes_spiking_f64(const void *step_fn, const void *observe_fn, const double *plant_params,
                              int64_t plant_bytes, int64_t width, const void *starts, int64_t start_rows, int64_t episodes,
                              int64_t n_obs, int64_t n_act, int64_t max_steps, const double *offset,
@@ -44,7 +46,8 @@ int64_t episodes_spiking_f64(const void *step_fn, const void *observe_fn, const 
                              const double *w_out, const double *rest, const double *sigma, int64_t window,
                              double period_s, int64_t substeps, double dt, double a, double b, double c, double d,
                              double vpeak, int64_t decoder, double action_max, double threshold, int64_t settle,
-                             int64_t rows, double *returns, int64_t *steps, int64_t *error, int threads);
+                             int64_t syn, double syn_k, int64_t rows, double *returns, int64_t *steps,
+                             int64_t *error, int threads);
 
 /* Recurrent sigmoid controllers (evolution.SigmoidController): networks w [G][n][n], nodes
    [0, n_in) clamped to the normalised observations and the next n_bias to 1, `updates`

@@ -127,10 +127,13 @@ typedef struct {
     int64_t n, np, window, substeps, decoder, settle;
     T gain, dt, a, b, c, d, vpeak;
     double period_s, action_max, threshold;
+    int64_t syn; /* exponential synapses: the synaptic current decays by syn_k per substep */
+    double syn_k;
 } FN(spiking_t_);
 
 typedef struct {
     T vv[LANES * MAXN], uu[LANES * MAXN], zz[LANES * MAXN], I[LANES * MAXN], cnt[LANES * MAXN];
+    T ss[LANES * MAXN]; /* synaptic currents (exponential synapses only) */
     const T *W[LANES];
     T *wbuf, *hist;
     unsigned char *draws;
@@ -158,6 +161,7 @@ static void FN(spiking_move_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, 
     memcpy(S->vv + to * np, S->vv + from * np, (size_t)np * sizeof(T));
     memcpy(S->uu + to * np, S->uu + from * np, (size_t)np * sizeof(T));
     memcpy(S->zz + to * np, S->zz + from * np, (size_t)np * sizeof(T));
+    memcpy(S->ss + to * np, S->ss + from * np, (size_t)np * sizeof(T));
     if (np == c->n) {
         S->W[to] = S->W[from];
     } else {
@@ -176,6 +180,8 @@ static void FN(spiking_step_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, 
     const int bern = c->keys != NULL;
     const int64_t n_src = bern ? n_x : 0;
     const T gain = c->gain, dt = c->dt, a = c->a, b = c->b, cc = c->c, d = c->d, vpeak = c->vpeak;
+    T *ss = c->syn ? S->ss : NULL;
+    const T sk = (T)c->syn_k, sk1 = (T)(1.0 - c->syn_k);
     for (int64_t k = 0; k < lanes; ++k) {
         const T *x = L->x + k * MAXN;
         for (int64_t j = 0; j < np; ++j) {
@@ -200,8 +206,10 @@ static void FN(spiking_step_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, 
                 S->zz[k * np + i] = s;
                 S->cnt[k * np + i] += s;
             }
-        LANE_WIDTHS(SIZED(IZH_LANES(S->vv, S->uu, S->zz, S->W, S->I, S->cnt, L_, N_, n_src, n, dt, a, b, cc, d, vpeak),
-                          IZH_LANES(S->vv, S->uu, S->zz, S->W, S->I, S->cnt, L_, np, n_src, n, dt, a, b, cc, d, vpeak)))
+        LANE_WIDTHS(SIZED(IZH_LANES(S->vv, S->uu, S->zz, S->W, S->I, S->cnt, L_, N_, n_src, n, dt, a, b, cc, d, vpeak,
+                                    ss, sk, sk1),
+                          IZH_LANES(S->vv, S->uu, S->zz, S->W, S->I, S->cnt, L_, np, n_src, n, dt, a, b, cc, d, vpeak,
+                                    ss, sk, sk1)))
     }
     for (int64_t k = 0; k < lanes; ++k) {
         const int64_t t = tt[k], g = L->row[k] / p->episodes, W = c->window;
@@ -233,6 +241,7 @@ static void FN(spiking_reset_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c,
         S->vv[k * np + j] = j < n ? c->v0[r * n + j] : (T)0;
         S->uu[k * np + j] = j < n ? c->u0[r * n + j] : (T)0;
         S->zz[k * np + j] = j < n ? c->z0[r * n + j] : (T)0;
+        S->ss[k * np + j] = 0; /* no synaptic current at rest (recurrent_init) */
     }
     memset(S->hist + k * c->window * np, 0, (size_t)(c->window * np) * sizeof(T));
 }
@@ -327,13 +336,14 @@ int64_t FN(episodes_spiking_)(const void *step_fn, const void *observe_fn, const
                               const T *w, const T *v0, const T *u0, const T *z0, int64_t n, const T *iconst, T gain,
                               const int64_t *keys, const T *w_out, const T *rest, const T *sigma, int64_t window,
                               double period_s, int64_t substeps, T dt, T a, T b, T c, T d, T vpeak,
-                              int64_t decoder, double action_max, double threshold, int64_t settle, int64_t rows,
-                              double *returns, int64_t *steps, int64_t *error, int threads) {
+                              int64_t decoder, double action_max, double threshold, int64_t settle, int64_t syn,
+                              double syn_k, int64_t rows, double *returns, int64_t *steps, int64_t *error,
+                              int threads) {
     const FN(plant_t_) plant = {(native_step_fn)step_fn, (native_observe_fn)observe_fn, plant_params,
                                 (const unsigned char *)starts, width * plant_bytes, width, start_rows, episodes, n_obs, n_act,
                                 max_steps, rows, offset, scale, coding, clip, n_in, returns, steps};
     const FN(spiking_t_) ctrl = {w, v0, u0, z0, iconst, w_out, rest, sigma, keys, n, padded_size(n), window, substeps,
-                                 decoder, settle, gain, dt, a, b, c, d, vpeak, period_s, action_max, threshold};
+                                 decoder, settle, gain, dt, a, b, c, d, vpeak, period_s, action_max, threshold, syn, syn_k};
     const FN(plant_t_) *p = &plant;
     int64_t next_row = 0;
     error[0] = error[1] = error[2] = 0;

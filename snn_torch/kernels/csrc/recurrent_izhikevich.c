@@ -98,11 +98,16 @@ static inline void NAME##_input(const T *zz, const T *W, T *it, int64_t n) {    
         for (int64_t j = 0; j < n; ++j) it[j] += zz[k] * Wk[j];                                \
     }                                                                                          \
 }                                                                                              \
+/* ss not NULL: exponential synapses, the synaptic current ss <- sk ss + sk1 W z (sk the decay,     \
+   sk1 = 1 - sk: snn_torch.functional.recurrent's _synaptic_input, in its order) drives them.   \
+   Padding neurons get no input, so their ss stays 0. */                                       \
 static inline void NAME##_lanes(T *vv, T *uu, T *zz, const T *const *W, const T *I, T *cnt,         \
                                 int64_t lanes, int64_t n, int64_t first, int64_t n_real,       \
-                                T dt, T a, T b, T c, T d, T vpeak) {                           \
+                                T dt, T a, T b, T c, T d, T vpeak, T *ss, T sk, T sk1) {       \
     T it[lanes * n];                                                                           \
     for (int64_t k = 0; k < lanes; ++k) NAME##_input(zz + k * n, W[k], it + k * n, n);         \
+    if (ss)                                                                                    \
+        for (int64_t j = 0; j < lanes * n; ++j) { ss[j] = ss[j] * sk + sk1 * it[j]; it[j] = ss[j]; } \
     NAME##_update(vv, uu, zz, it, I, cnt, lanes * n, n, first, n_real, dt, a, b, c, d, vpeak); \
 }
 DEFINE_NEURON(izh_f32, float)
@@ -183,8 +188,10 @@ void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *
                         cnt[k * np + i] += s;                                                  \
                     }                                                                          \
                 }                                                                              \
-                LANE_WIDTHS(SIZED(PREFIX##_lanes(vv, uu, zz, W, I, cnt, L_, N_, n_src, n, dt, a, b, c, d, vpeak), \
-                                  PREFIX##_lanes(vv, uu, zz, W, I, cnt, L_, np, n_src, n, dt, a, b, c, d, vpeak))) \
+                LANE_WIDTHS(SIZED(PREFIX##_lanes(vv, uu, zz, W, I, cnt, L_, N_, n_src, n, dt, a, b, c, d, vpeak, \
+                                                 NULL, 0, 0),                                  \
+                                  PREFIX##_lanes(vv, uu, zz, W, I, cnt, L_, np, n_src, n, dt, a, b, c, d, vpeak, \
+                                                 NULL, 0, 0)))                                 \
             }                                                                                  \
             for (int64_t k = 0; k < lanes; ++k) {                                              \
                 const int64_t r = r0 + k;                                                      \
