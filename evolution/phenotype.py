@@ -109,7 +109,7 @@ class SpikingSpec:
         synapse_tau_ms: time constant (ms) of exponential (current-based) synapses: a spike's
             charge, the same as above, arrives spread over about ``tau``, so a neuron also sees
             a lagged copy of its input (memory across control steps). 0 (default): it arrives in
-            one substep. Above 0 the network runs the torch step, not the C kernels.
+            one substep. Above 0 the C kernels run it too; the compiled (CUDA) step does not.
         encoder: ``"current"``: input node ``k`` gets ``i_input_max * x_k`` (mV/ms) on top of the
             background; ``"bernoulli"``: input nodes are spike sources firing with probability
             ``x_k * input_rate_max_hz * dt`` per substep, keyed by a hash of the genome.
@@ -501,9 +501,8 @@ class SpikingController(_Phenotype):
         if obs01.shape != (B, self.n_in):
             raise ValueError(f"observations must be [{B}, {self.n_in}], got {tuple(obs01.shape)}")
         self.network.check_network_once(network, B)  # the kernel reads weights by it
-        v, u, z = neurons
-        if not (v.is_contiguous() and u.is_contiguous() and z.is_contiguous() and window.history.is_contiguous()):
-            neurons = RecurrentState(*(t.contiguous() for t in neurons))
+        if not (all(t.is_contiguous() for t in neurons) and window.history.is_contiguous()):
+            neurons = type(neurons)(*(t.contiguous() for t in neurons))
             window = RateWindowState(window.history.contiguous(), window.steps)
         kernel = self._kernel
         if kernel is None or kernel.dtype != neurons.v.dtype:  # constants bound once, not every step
@@ -560,7 +559,7 @@ def _bind_kernel(controller: SpikingController, dtype: torch.dtype) -> _BoundKer
     net, spec = controller.network, controller.spec
     k = kernel_constants(controller, dtype)
     fn = RateControlKernel(k.w_eff, net.p, dt_ms=spec.dt_ms, substeps=controller.substeps, gain=k.gain,
-                           bernoulli=k.bernoulli, iconst=k.iconst, w_out=k.w_out, rest=k.rest)
+                           bernoulli=k.bernoulli, iconst=k.iconst, w_out=k.w_out, rest=k.rest, syn_decay=net.syn_decay)
     return _BoundKernel(fn, dtype, controller.window.window, controller.window.period_s,
                         controller.substeps * controller.n_in)
 

@@ -59,7 +59,7 @@ def _controller_supported(controller) -> bool:
         if controller.sigma.dtype != dtype:
             return False  # the torch decoder would promote; not worth a second kernel
         probe = controller.initial_state(torch.zeros(1, dtype=torch.int64))
-        return controller.network.path(probe.neurons, episodes=True) == "kernel"
+        return controller.network.path(probe.neurons) == "kernel"
     if isinstance(controller, SigmoidController):
         net = controller.network
         outputs = controller.outputs

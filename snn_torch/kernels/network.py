@@ -28,7 +28,7 @@ from torch import Tensor
 
 from snn_torch.functional.counter_rng import BernoulliSources
 from snn_torch.functional.izhikevich import IzhikevichParams
-from snn_torch.functional.recurrent import RecurrentState
+from snn_torch.functional.recurrent import RecurrentState, SynapticState
 from snn_torch.kernels.build import library_loader
 
 __all__ = ["MAX_NODES", "kernel_available", "kernel_supports", "network_steps_kernel", "check_network_index",
@@ -91,7 +91,7 @@ def _check(i_ext: Tensor, state: RecurrentState, w_eff: Tensor, p: IzhikevichPar
 def network_steps_kernel(
     i_ext: Tensor, state: RecurrentState, w_eff: Tensor, p: IzhikevichParams, *, dt_ms: float, substeps: int,
     network: Tensor | None = None, source_spikes: Tensor | BernoulliSources | None = None, inplace: bool = False,
-    trusted: bool = False,
+    trusted: bool = False, syn_decay: float | None = None,
 ) -> tuple[Tensor, RecurrentState]:
     """``recurrent_izhikevich_steps`` in C (Heun, sub-step reset, Heaviside spikes).
 
@@ -107,6 +107,7 @@ def network_steps_kernel(
         trusted: skip the checks of shapes, dtypes and network indices (a caller that made them
             already, once per batch: ``PopulationRecurrentIzhikevich.control_step``). An index
             outside ``w_eff`` would read outside its memory.
+        syn_decay: exponential synapses' per-step decay (``state`` a ``SynapticState``), or None.
 
     Returns:
         ``(counts, new_state)``: spikes per node over the substeps ``[B, N]``, and the state.
@@ -114,6 +115,8 @@ def network_steps_kernel(
     dtype, (B, N) = state.v.dtype, state.v.shape
     if not trusted:
         _check(i_ext, state, w_eff, p, network)
+    if (syn_decay is not None) != isinstance(state, SynapticState):
+        raise ValueError("syn_decay and a SynapticState go together (exponential synapses), or neither")
     net_ptr = None if network is None else network.contiguous().data_ptr()
     n_src, src_ptr, prob_ptr, keys_ptr, base = 0, None, None, None, 0
     if isinstance(source_spikes, BernoulliSources):
@@ -132,9 +135,11 @@ def network_steps_kernel(
         source_spikes = source_spikes.to(dtype).contiguous()
         n_src, src_ptr = source_spikes.shape[2], source_spikes.data_ptr()
     if inplace and all(t.is_contiguous() for t in state):
-        v, u, z = state
+        tensors = tuple(state)
     else:
-        v, u, z = (t.contiguous().clone() for t in state)  # the kernel updates these in place
+        tensors = tuple(t.contiguous().clone() for t in state)  # the kernel updates these in place
+    v, u, z = tensors[:3]
+    syn = tensors[3] if syn_decay is not None else None
     w = w_eff.contiguous()
     i = i_ext.contiguous()
     counts = torch.empty_like(v)
@@ -142,8 +147,8 @@ def network_steps_kernel(
     fn = lib.izh_network_steps_f32 if dtype == torch.float32 else lib.izh_network_steps_f64
     fn(v.data_ptr(), u.data_ptr(), z.data_ptr(), counts.data_ptr(), w.data_ptr(), net_ptr, i.data_ptr(), src_ptr,
        prob_ptr, keys_ptr, base, B, N, n_src, int(substeps), float(dt_ms), float(p.a), float(p.b), float(p.c), float(p.d), float(p.v_peak),
-       torch.get_num_threads())
-    return counts, RecurrentState(v, u, z)
+       None if syn is None else syn.data_ptr(), 0.0 if syn_decay is None else float(syn_decay), torch.get_num_threads())
+    return counts, RecurrentState(v, u, z) if syn is None else SynapticState(v, u, z, syn)
 
 
 class RateControlKernel:
@@ -160,12 +165,14 @@ class RateControlKernel:
             substep (drawn from each row's stream, ``BernoulliSources``' counters).
         iconst: ``[N]`` constant current of every node (background, bias nodes), mV/ms.
         w_out: ``[G, N, K]`` readout weights; rest: ``[N]`` rates subtracted first (Hz), or None.
+        syn_decay: exponential synapses' per-step decay (states are then ``SynapticState``s), or None.
 
     Every tensor must be contiguous, on the CPU, of one dtype (float32 or float64), N <= 64.
     """
 
     def __init__(self, w_eff: Tensor, p: IzhikevichParams, *, dt_ms: float, substeps: int, gain: float,
-                 bernoulli: bool, iconst: Tensor, w_out: Tensor, rest: Tensor | None) -> None:
+                 bernoulli: bool, iconst: Tensor, w_out: Tensor, rest: Tensor | None,
+                 syn_decay: float | None = None) -> None:
         G, N, _ = w_eff.shape
         tensors = {"w_eff": w_eff, "iconst": iconst, "w_out": w_out, **({} if rest is None else {"rest": rest})}
         for name, t in tensors.items():
@@ -187,6 +194,7 @@ class RateControlKernel:
                         None if rest is None else rest.data_ptr(), int(substeps), float(dt_ms),
                         *(float(x) for x in (p.a, p.b, p.c, p.d, p.v_peak)))
         self.bernoulli = bool(bernoulli)
+        self.syn_decay = syn_decay
 
     def __call__(self, x: Tensor, state: RecurrentState, network: Tensor, keys: Tensor | None, base: int,
                  history: Tensor, slot: int, rate_div: float) -> tuple[Tensor, Tensor]:
@@ -197,7 +205,8 @@ class RateControlKernel:
         rate window ``history [W, B, N]`` are updated in place (``slot``: this step's place in it);
         rates are spikes / ``rate_div`` (s); ``keys [B]`` and ``base``: the Bernoulli draws'
         streams and first counter."""
-        v, u, z = state
+        v, u, z = state[:3]
+        syn = state.s if self.syn_decay is not None else None
         B = v.shape[0]
         counts = torch.empty_like(v)
         drive = v.new_empty((B, self.num_outputs))
@@ -205,7 +214,8 @@ class RateControlKernel:
         self._fn(v.data_ptr(), u.data_ptr(), z.data_ptr(), counts.data_ptr(), w, network.data_ptr(), x.data_ptr(),
                  x.shape[1], gain, iconst, keys.data_ptr() if self.bernoulli else None, base, history.data_ptr(),
                  history.shape[0], slot, rate_div, w_out, self.num_outputs, rest, drive.data_ptr(), B,
-                 self.num_neurons, substeps, dt, a, b, c, d, vpeak, torch.get_num_threads())
+                 self.num_neurons, substeps, dt, a, b, c, d, vpeak, None if syn is None else syn.data_ptr(),
+                 0.0 if self.syn_decay is None else float(self.syn_decay), torch.get_num_threads())
         return drive, counts
 
     def decode(self, drive: Tensor, sigma: Tensor, decoder: int, action_max: float, threshold: float) -> Tensor:

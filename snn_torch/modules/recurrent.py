@@ -158,7 +158,7 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
         synapse_tau_ms: time constant (ms) of exponential synapses: a spike's current decays as
             ``exp(-t / tau)`` and carries the same charge as with 0 (the default: it lasts one
             step). Above 0 the state is a ``SynapticState`` and ``control_step`` runs the torch
-            step (the C kernel and the compiled step carry no synaptic current yet).
+            step or the C kernel (the compiled step carries no synaptic current yet).
         trainable: register ``weight`` as an ``nn.Parameter`` (else a buffer).
         spike_fn: spike function; default ``heaviside`` (evolution needs no gradient).
         backend: how ``control_step`` runs: ``"auto"`` (C kernel on the CPU where it applies,
@@ -235,12 +235,11 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
             spike_fn=self.spike_fn, substep_reset=self.substep_reset, validate=True, syn_decay=self.syn_decay,
         )
 
-    def path(self, state: RecurrentState, *, episodes: bool = False) -> str:
-        """Which code ``control_step`` runs for ``state``: ``"kernel"``, ``"compiled"`` or ``"torch"``.
-        ``episodes``: which the whole-episode loop (``evolution.kernels.episodes``) may run,
-        whose C kernel also carries exponential synapses."""
+    def path(self, state: RecurrentState) -> str:
+        """Which code ``control_step`` runs for ``state``: ``"kernel"``, ``"compiled"`` or ``"torch"``
+        (the compiled step carries no synaptic current: with ``synapse_tau_ms`` > 0 not that one)."""
         plain = (self.method == "heun" and self.substep_reset and self.spike_fn is heaviside
-                 and not self.weight.requires_grad and (episodes or self.syn_decay is None))
+                 and not self.weight.requires_grad)
         key = (state.v.device, state.v.dtype, state.v.dim(), state.v.shape[-1], plain)
         if self._supported.get(key) is None:
             self._supported[key] = plain and kernel_supports(state.v, self.p)
@@ -248,12 +247,12 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
             return "kernel"
         if self.backend == "kernel":
             raise ValueError("backend='kernel' needs CPU float32/64 state, N <= 64, scalar neuron parameters, "
-                             "Heun with the sub-step reset, heaviside spikes, no gradient, no synaptic time "
-                             "constant and a C compiler")
-        if self.backend == "compiled" and self.syn_decay is not None and not episodes:
-            raise ValueError("backend='compiled' carries no synaptic current: use 'auto' or 'torch' with "
-                             "synapse_tau_ms > 0")
-        if plain and (self.backend == "compiled" or (self.backend == "auto" and state.v.device.type == "cuda")):
+                             "Heun with the sub-step reset, heaviside spikes, no gradient and a C compiler")
+        if self.backend == "compiled" and self.syn_decay is not None:
+            raise ValueError("backend='compiled' carries no synaptic current: use 'auto', 'kernel' or 'torch' "
+                             "with synapse_tau_ms > 0")
+        if plain and self.syn_decay is None and (self.backend == "compiled"
+                                                 or (self.backend == "auto" and state.v.device.type == "cuda")):
             return "compiled"
         return "torch"
 
@@ -294,7 +293,8 @@ class PopulationRecurrentIzhikevich(_PopulationNetwork):
             if any(t.shape != i_ext.shape or t.dtype != i_ext.dtype for t in state):  # (v, u, z): no synapses
                 raise ValueError(f"state tensors must all be [{i_ext.shape[0]}, {self.num_neurons}] of {i_ext.dtype}")
             return network_steps_kernel(i_ext, state, w_eff, self.p, dt_ms=self.dt_ms, substeps=substeps,
-                                        network=network, source_spikes=source_spikes, inplace=inplace, trusted=True)
+                                        network=network, source_spikes=source_spikes, inplace=inplace, trusted=True,
+                                        syn_decay=self.syn_decay)
         if isinstance(source_spikes, BernoulliSources):  # the torch paths draw them here
             source_spikes = source_spikes.spikes(substeps, state.v.dtype)
         w = self._row_weights(state.v.dtype, network, i_ext.shape[0])

@@ -133,11 +133,14 @@ static inline int64_t padded_size(int64_t n) {
 void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *iext,         \
           const T *src, const double *prob, const int64_t *keys, int64_t base, int64_t rows,  \
           int64_t n, int64_t n_src, int64_t substeps, T dt, T a,                               \
-          T b, T c, T d, T vpeak, int threads) {                                               \
+          T b, T c, T d, T vpeak, T *s, double syn_k, int threads) {                           \
     const int64_t np = padded_size(n), chunks = (rows + LANES - 1) / LANES;                    \
+    const T sk = (T)syn_k, sk1 = (T)(1.0 - syn_k);                                             \
     _Pragma("omp parallel num_threads(threads)")                                               \
     {                                                                                          \
         T vv[LANES * MAXN], uu[LANES * MAXN], zz[LANES * MAXN], I[LANES * MAXN];               \
+        T ss[LANES * MAXN]; /* synaptic currents (s not NULL); padding stays 0 */              \
+        memset(ss, 0, sizeof ss);                                                              \
         T cnt[LANES * MAXN]; const T *W[LANES];                                                        \
         T *wbuf = (T *)calloc(LANES * np * np, sizeof(T)); /* padding stays 0: no synapses */  \
         /* Bernoulli draws of a chunk's control step, drawn before its substeps in one flat loop \
@@ -168,6 +171,7 @@ void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *
                 memcpy(uu + k * np, u + r * n, n * sizeof(T));                                 \
                 memcpy(zz + k * np, z + r * n, n * sizeof(T));                                 \
                 memcpy(I + k * np, iext + r * n, n * sizeof(T));                               \
+                if (s) memcpy(ss + k * np, s + r * n, n * sizeof(T));                          \
                 for (int64_t j = 0; j < np; ++j) cnt[k * np + j] = 0;                          \
             }                                                                                  \
             for (int64_t k = 0; k < lanes && bern; ++k) {                                      \
@@ -189,9 +193,9 @@ void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *
                     }                                                                          \
                 }                                                                              \
                 LANE_WIDTHS(SIZED(PREFIX##_lanes(vv, uu, zz, W, I, cnt, L_, N_, n_src, n, dt, a, b, c, d, vpeak, \
-                                                 NULL, 0, 0),                                  \
+                                                 s ? ss : NULL, sk, sk1),                      \
                                   PREFIX##_lanes(vv, uu, zz, W, I, cnt, L_, np, n_src, n, dt, a, b, c, d, vpeak, \
-                                                 NULL, 0, 0)))                                 \
+                                                 s ? ss : NULL, sk, sk1)))                     \
             }                                                                                  \
             for (int64_t k = 0; k < lanes; ++k) {                                              \
                 const int64_t r = r0 + k;                                                      \
@@ -199,6 +203,7 @@ void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *
                 memcpy(u + r * n, uu + k * np, n * sizeof(T));                                 \
                 memcpy(z + r * n, zz + k * np, n * sizeof(T));                                 \
                 memcpy(counts + r * n, cnt + k * np, n * sizeof(T));                           \
+                if (s) memcpy(s + r * n, ss + k * np, n * sizeof(T));                          \
             }                                                                                  \
         }                                                                                      \
         free(wbuf); free(draws); free(pm);                                                     \
@@ -216,7 +221,7 @@ void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *
           int64_t n_x, T gain, const T *iconst, const int64_t *keys, int64_t base,            \
           T *history, int64_t window, int64_t slot, T rate_div, const T *w_out,               \
           int64_t n_out, const T *rest, T *drive, int64_t rows, int64_t n, int64_t substeps,   \
-          T dt, T a, T b, T c, T d, T vpeak, int threads) {                                    \
+          T dt, T a, T b, T c, T d, T vpeak, T *s, double syn_k, int threads) {                \
     T *iext = (T *)malloc((size_t)(rows * n > 0 ? rows * n : 1) * sizeof(T));                 \
     double *prob = keys ? (double *)malloc((size_t)(rows * n_x > 0 ? rows * n_x : 1) * sizeof(double)) \
                         : NULL;                                                                \
@@ -228,7 +233,7 @@ void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *
         for (int64_t i = 0; keys && i < n_x; ++i) prob[r * n_x + i] = (double)(xr[i] * gain);   \
     }                                                                                          \
     STEPS(v, u, z, counts, w, net, iext, NULL, prob, keys, base, rows, n, keys ? n_x : 0,    \
-          substeps, dt, a, b, c, d, vpeak, threads);                                           \
+          substeps, dt, a, b, c, d, vpeak, s, syn_k, threads);                                 \
     free(iext); free(prob);                                                                    \
     const int64_t plane = rows * n;                                                            \
     _Pragma("omp parallel for num_threads(threads) schedule(static)")                         \
