@@ -26,7 +26,7 @@ from evolution.neat import NEAT
 from evolution.neat121 import NEAT121_DPNV, NEAT121_DPV, neat121_config
 from evolution.population import Genomes
 from evolution.reporters import BaseReporter
-from evolution.reproduce import reproduce, species_offspring
+from evolution.reproduce import _parents_per_species, reproduce, select_parents, species_offspring
 from evolution.rng import RunRNG
 from evolution.speciate import SpeciesState, empty_species, speciate
 from tests.evolution.helpers import assert_same_breeding, bred_on_both_paths, population, small_config
@@ -447,8 +447,9 @@ def test_the_presets_transcribe_the_two_parameter_files():
 @pytest.mark.parametrize("variant", ["dpv", "dpnv"])
 @pytest.mark.parametrize("tries", [0, 20])
 def test_kernels_breed_the_reference_generations_under_the_presets(variant, tries):
-    # A controller's layout (four inputs and a bias, recurrent), the preset's GA, populations
-    # small enough to be quick; structure grows, species form, go stagnant and are penalised.
+    # A controller's layout (four inputs and a bias, recurrent), the preset's GA (shared new-link
+    # weights, uniform new weights and NEAT's parents included), populations small enough to be
+    # quick; structure grows, species form, go stagnant and are penalised.
     cfg = neat121_config(variant, num_inputs=4, num_outputs=1, num_bias=1, max_hidden=12, pop_size=60,
                          node_add_prob=0.1, conn_add_prob=0.3, max_stagnation=3, population_stagnation=4,
                          obliterate_interval=5, obliterate_min_age=3, compatibility_threshold=1.5,
@@ -647,25 +648,11 @@ def test_a_link_added_again_in_the_same_generation_takes_the_first_ones_weight()
     assert out.weight[0][new[0]].unique().numel() == int(new.any(1).sum()) > 1
 
 
-@needs_kernel
-@pytest.mark.parametrize("variant", ["dpv", "dpnv"])
-def test_kernels_breed_the_reference_generations_with_shared_link_weights(variant):
-    cfg = neat121_config(variant, num_inputs=4, num_outputs=1, num_bias=1, max_hidden=12, pop_size=60,
-                         node_add_prob=0.1, conn_add_prob=0.4, recur_only_prob=0.4, max_stagnation=3,
-                         population_stagnation=4, compatibility_threshold=1.5, conn_add_tries=20,
-                         conn_add_shared_weight=True)
-    g = torch.Generator().manual_seed(2)
-    ref, fast = bred_on_both_paths(cfg, [5, 6], [
-        (torch.rand(2, cfg.pop_size, generator=g, dtype=torch.float64),) for _ in range(10)])
-    assert_same_breeding(ref, fast)
-
-
 # --- parents per species: NEAT 1.2.1's floor(s * size + 1) -----------------------------
 @pytest.mark.parametrize("select", ["tensor", "kernel"])
 def test_neatc_survival_keeps_floor_s_size_plus_one_parents(select):
     if select == "kernel" and not select_kernel.kernel_available():
         pytest.skip("no C compiler: kernels unavailable")
-    from evolution.reproduce import select_parents
     pick = select_parents if select == "tensor" else select_kernel.select_parents
     runs, P = 64, 10  # one species of 10: 0.4 * 10 = 4 is whole, so floor(4 + 1) = 5 against ceil(4) = 4
     fitness = torch.arange(P, 0, -1, dtype=torch.float64).expand(runs, P).contiguous()  # genome k ranks k
@@ -682,7 +669,6 @@ def test_neatc_survival_keeps_floor_s_size_plus_one_parents(select):
 
 
 def test_neatc_survival_never_keeps_more_parents_than_members():
-    from evolution.reproduce import _parents_per_species
     size = torch.tensor([1, 2, 3, 5, 10, 150])  # species with members (empty ones get none anyway)
     neatc = _parents_per_species(size, small_config(survival_threshold=1.0, survival_neatc=True))
     assert neatc.tolist() == size.tolist()  # floor(size + 1) capped at size
