@@ -2,7 +2,7 @@
 
     python -m experiments.dpnv_fitness_starts --starts 16 --seeds 20
 
-Sigmoid NEAT (``--kind snn``: NEAT-SNN), the signed coding, NEAT C++ 1.2.1's test of a generation (the species champion)
+Sigmoid NEAT (``--kind snn``: NEAT-SNN), the signed coding (``--coding push-pull``: NEAT-SNN's DPNV coding), NEAT C++ 1.2.1's test of a generation (the species champion)
 and the ``neat-1.2.1-dpnv-per-gene`` GA (``--ga``), on tuning seeds 5000 + i unless ``--first-seed``, with a budget of 100,000
 evaluations. The fitness of a genome is its mean damping fitness from the standard start and
 ``starts - 1`` fixed random starts, drawn uniformly within Gruau's ranges (seed 0), not from the
@@ -55,6 +55,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--generations", type=int, default=None, help="default: 100,000 evaluations' worth")
     p.add_argument("--network-ms", type=float, default=None,
                    help="NEAT-SNN: network time per control step (ms; default the plant's 20 ms)")
+    p.add_argument("--coding", default="signed", choices=("signed", "push-pull"),
+                   help="the study's input coding (tasks.studies.double_pole.CODINGS)")
     p.add_argument("--spec", default="{}", help="JSON overrides of the controller spec")
     p.add_argument("--cfg", default="{}", help="JSON overrides of the NEAT config")
     p.add_argument("--ga", default="neat-1.2.1-dpnv-per-gene", help="GA preset, or 'tuned' (the study's pick)")
@@ -62,16 +64,16 @@ def main(argv: list[str] | None = None) -> None:
     a = p.parse_args(argv)
     torch.set_num_threads(1)
     seeds = list(range(a.first_seed, a.first_seed + a.seeds))
-    task = study_task("dpnv", "signed")
+    task = study_task("dpnv", a.coding)
     if a.network_ms is not None:
         task.control_period_s = a.network_ms / 1000.0
     spec_overrides = json.loads(a.spec)
     if isinstance(spec_overrides.get("neuron"), str):  # a preset's name, e.g. "regular_spiking"
         spec_overrides["neuron"] = PRESETS[spec_overrides["neuron"]]
     elif isinstance(spec_overrides.get("neuron"), dict):  # a, b, c, d (and v_peak) over the study's neuron
-        spec_overrides["neuron"] = study_spec("dpnv", a.kind, "signed").neuron._replace(**spec_overrides["neuron"])
-    spec = replace(study_spec("dpnv", a.kind, "signed"), **spec_overrides)
-    cfg = study_config("dpnv", a.kind, ga=a.ga, coding="signed", **json.loads(a.cfg))
+        spec_overrides["neuron"] = study_spec("dpnv", a.kind, a.coding).neuron._replace(**spec_overrides["neuron"])
+    spec = replace(study_spec("dpnv", a.kind, a.coding), **spec_overrides)
+    cfg = study_config("dpnv", a.kind, ga=a.ga, coding=a.coding, **json.loads(a.cfg))
     starts = damping_fitness_starts(task, a.starts)
     neat = NEAT(cfg, seeds=seeds)
     if a.progress:
@@ -96,7 +98,7 @@ def main(argv: list[str] | None = None) -> None:
             >= GENERALIZATION_STEPS).sum(-1)[:, 0]
     evals = neat121_counts(cfg.pop_size, neat.solved_generation.tolist(), neat.solved_position.tolist())
     solved = [e for e in evals if e is not None]
-    print(json.dumps({"kind": a.kind, "ga": a.ga, "network_ms": a.network_ms, "spec": a.spec, "cfg": a.cfg,
+    print(json.dumps({"kind": a.kind, "ga": a.ga, "coding": a.coding, "network_ms": a.network_ms, "spec": a.spec, "cfg": a.cfg,
                       "generations": generations, "starts": a.starts, "seeds": f"{seeds[0]}-{seeds[-1]}", "solved": f"{len(solved)}/{len(seeds)}",
                       "mean": round(statistics.mean(solved)) if solved else None,
                       "median": statistics.median(solved) if solved else None,

@@ -399,7 +399,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="how observations reach the networks: 'study' (default: the paper's, or the double-pole "
                           "study's: [0, 1] over the bounds) or 'signed' (double pole: NEAT C++ 1.2.1's x/4.8, x_dot/2, "
                           "theta/0.52, theta_dot/2, centred and unclipped; tables: [-1, 1] over the paper's bounds, "
-                          "push-pull pairs for Bernoulli inputs; a sensitivity study)")
+                          "push-pull pairs for Bernoulli inputs; a sensitivity study) or 'push-pull' (double pole: "
+                          "NEAT C++ 1.2.1's values on two input nodes per variable, the positive and the negative "
+                          "part; NEAT-SNN at 300 nA per unit: the coding with which it solves DPNV)")
     rep.add_argument("--champion-test", choices=CHAMPION_TESTS, default=None,
                      help="dpnv only: the test of a generation: NEAT C++ 1.2.1's champion of the best species not "
                           "tested since it last improved ('species', the default), or each run's overall champion, "

@@ -43,15 +43,21 @@ from tasks.studies.generalization import (
 )
 from tasks.studies.registry import CONTROLLERS, STUDIES, ga_overrides
 
-__all__ = ["LONG_BALANCE_STEPS", "GENERALIZATION_PASS", "champion_solves", "champions_pass", "champions_test", "SpeciesChampionTest", "species_champion_test", "VARIANTS", "CODINGS", "NEAT121_SCALES", "POPULATION", "OBSERVATION_BOUNDS", "PUBLISHED", "study_task", "study_spec", "study_config",
+__all__ = ["LONG_BALANCE_STEPS", "GENERALIZATION_PASS", "champion_solves", "champions_pass", "champions_test", "SpeciesChampionTest", "species_champion_test", "VARIANTS", "CODINGS", "PUSH_PULL_INPUT_NA", "NEAT121_SCALES", "POPULATION", "OBSERVATION_BOUNDS", "PUBLISHED", "study_task", "study_spec", "study_config",
            "study_fitness", "study_solved", "damping_fitness_starts", "FITNESS_STARTS_SEED"]
 
 VARIANTS = ("dpv", "dpnv")
 # How observations reach the networks: "study": [0, 1] over OBSERVATION_BOUNDS (the study as first
 # run); "signed": NEAT C++ 1.2.1's coding, each variable over its fixed scale, centred, unclipped
 # (its cartpole2 experiment feeds x / 4.8, x_dot / 2, theta / 0.52, theta_dot / 2), signed input
-# currents for NEAT-SNN (evolution.input_coding).
-CODINGS = ("study", "signed")
+# currents for NEAT-SNN (evolution.input_coding); "push-pull": the signed values on two input nodes
+# per variable (the positive and the negative part), for NEAT-SNN at PUSH_PULL_INPUT_NA per unit.
+CODINGS = ("study", "signed", "push-pull")
+# NEAT-SNN's input current per unit of a push-pull input (nA). Picked on tuning seeds 5000-5004 (DPNV,
+# 150 generations, docs/beyond-the-paper.md): one control step counts an input neuron's spikes over
+# 20 ms, so at the study's 60 nA it reads an input to about 0.095 units (2.8 degrees of pole angle),
+# too coarse to infer velocities; at 300 nA to about 0.019. 600 nA held fewer starts, 1200 none.
+PUSH_PULL_INPUT_NA = 300.0
 NEAT121_SCALES = {"dpv": (4.8, 2.0, 0.52, 2.0, 0.52, 2.0), "dpnv": (4.8, 0.52, 0.52)}  # m, m/s, rad, rad/s
 POPULATION = {"dpv": 150, "dpnv": 1000}  # [NEAT02]
 OBSERVATION_BOUNDS = {"dpv": (2.4, 2.0, 0.3, 2.0, 0.3, 4.0), "dpnv": (2.4, 0.3, 0.3)}  # m, m/s, rad, rad/s
@@ -116,10 +122,17 @@ def study_spec(variant: str, controller: str, coding: str = "study") -> SpikingS
     from rest (``rest_relative``) over one control step (20 ms, ``rate_window_steps=1``). Picked
     on tuning seeds 5000-5009 (docs/beyond-the-paper.md): without ``rest_relative`` no DPV run
     solved in 40 generations; with it, a window of 4 steps solved 4/10 by generation 40 and a
-    window of 1 step 5/10 by generation 19."""
+    window of 1 step 5/10 by generation 19. ``coding`` (``CODINGS``): ``"signed"`` and ``"push-pull"``
+    feed NEAT 1.2.1's scaled values unclipped, on one input node per variable or two (push-pull:
+    ``max(s, 0)`` and ``max(-s, 0)``, NEAT-SNN at ``PUSH_PULL_INPUT_NA`` nA per unit)."""
     _check(variant, controller, coding)
     spec = SpikingSpec(rest_relative=True, rate_window_steps=1) if controller == "snn" else SigmoidSpec()
-    return spec if coding == "study" else replace(spec, input_coding="signed", clip_inputs=False)
+    if coding == "study":
+        return spec
+    if coding == "signed":
+        return replace(spec, input_coding="signed", clip_inputs=False)
+    gain = {"i_input_max": PUSH_PULL_INPUT_NA} if controller == "snn" else {}
+    return replace(spec, input_coding="push_pull", clip_inputs=False, **gain)
 
 
 def study_config(variant: str, controller: str, *, self_loops: bool = False, ga: str = "tuned",

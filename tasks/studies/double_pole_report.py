@@ -13,7 +13,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from tasks.studies.double_pole import NEAT121_SCALES, PUBLISHED, study_spec, study_task
+from tasks.studies.double_pole import NEAT121_SCALES, PUBLISHED, PUSH_PULL_INPUT_NA, study_spec, study_task
 from tasks.studies.generalization import GENERALIZATION_STEPS, generalization_starts
 from tasks.studies.results import (
     LABELS,
@@ -163,6 +163,11 @@ def format_study_markdown(summary: dict, command: str) -> str:
         scales = ", ".join(f"{v:g}" for v in NEAT121_SCALES[variant])
         lines += ["", f"Input coding: signed, as NEAT C++ 1.2.1 feeds its networks: each observed variable divided by "
                   f"its scale ({scales}; m, m/s, rad, rad/s), centred and unclipped (`--coding signed`)."]
+    if any(row.get("coding") == "push-pull" for row in summary["rows"].values()):
+        scales = ", ".join(f"{v:g}" for v in NEAT121_SCALES[variant])
+        lines += ["", f"Input coding: push-pull: each observed variable divided by its scale ({scales}; m, m/s, rad, "
+                  f"rad/s) as NEAT C++ 1.2.1 feeds it, unclipped, on two input nodes, its positive and its negative "
+                  f"part; NEAT-SNN's input neurons take {PUSH_PULL_INPUT_NA:g} nA per unit (`--coding push-pull`)."]
     lines += ["", f"Evaluations = generations x population, as NEAT 2002 counts them (the champion tests are not "
               f"counted); NEAT C++ 1.2.1 counts population x (generation - 1) + the position of the first solving "
               f"genome in its generation. A run that does not solve within {budget} generations is a failure; the mean over all "

@@ -208,6 +208,7 @@ _NEAT_PYTHON_01 = ("neat-python", MappingProxyType({"survival_threshold": 0.1}))
 _NEAT_CPP = ("neat-c++", MappingProxyType({}))
 _PAPER_REPORT = "tasks.studies.table_report:write_table_report"
 _DOUBLE_POLE_REPORT = "tasks.studies.double_pole_report:write_study_report"
+_DOUBLE_POLE_CODINGS = ("study", "signed", "push-pull")  # tasks.studies.double_pole.CODINGS (tested equal)
 
 STUDIES: Mapping[str, Study] = MappingProxyType({s.name: s for s in (
     Study("table1", "Markov cart-pole (Table I): x, x_dot, theta, theta_dot as Bernoulli-coded input spikes, "
@@ -220,7 +221,8 @@ STUDIES: Mapping[str, Study] = MappingProxyType({s.name: s for s in (
     # DPV; DPNV takes DPV's pick (docs/beyond-the-paper.md)
     Study("dpv", "double-pole balancing with velocities (NEAT 2002): six inputs, +-10 N, population 150, "
           "solved when a genome balances 100,000 steps", "tasks.studies.double_pole",
-          {"sigmoid": _NEAT_PYTHON_01, "snn": _NEAT_PYTHON_01}, _DOUBLE_POLE_REPORT),
+          {"sigmoid": _NEAT_PYTHON_01, "snn": _NEAT_PYTHON_01}, _DOUBLE_POLE_REPORT,
+          codings=_DOUBLE_POLE_CODINGS),
     # DPNV's test of a generation: NEAT C++ 1.2.1's ("species": the champion of the best species not
     # tested since it improved), or each generation's overall champion ("champion", the default
     # before 2026-12-03, which retests the same genome while it stays the best); its damping fitness
@@ -229,7 +231,7 @@ STUDIES: Mapping[str, Study] = MappingProxyType({s.name: s for s in (
           "fitness over 1000 steps, population 1000, solved when a champion balances 100,000 steps and 200 of "
           "the 625 generalisation starts", "tasks.studies.double_pole",
           {"sigmoid": _NEAT_PYTHON_01, "snn": _NEAT_PYTHON_01}, _DOUBLE_POLE_REPORT,
-          champion_tests=("species", "champion"), multi_start_fitness=True),
+          codings=_DOUBLE_POLE_CODINGS, champion_tests=("species", "champion"), multi_start_fitness=True),
 )})
 
 

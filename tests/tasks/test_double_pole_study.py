@@ -2,17 +2,20 @@
 solution, evaluations counted as it counts them, and the report."""
 
 import json
+from dataclasses import replace
 
 import pytest
 import torch
 
-from evolution import NEAT
+from evolution import NEAT, TaskFitness
 from evolution.checkpoint import load_checkpoint_dict
 from tasks.studies.double_pole import (
+    CODINGS,
     LONG_BALANCE_STEPS,
     OBSERVATION_BOUNDS,
     POPULATION,
     PUBLISHED,
+    PUSH_PULL_INPUT_NA,
     damping_fitness_starts,
     study_config,
     study_fitness,
@@ -21,6 +24,7 @@ from tasks.studies.double_pole import (
     study_task,
 )
 from tasks.studies.double_pole_report import format_study_markdown, study_rows, write_study_report
+from tasks.studies.registry import STUDIES
 from tasks.studies.reproduce import ReproduceError, run_controller
 
 
@@ -91,8 +95,43 @@ def test_the_signed_coding_is_neat_121s_and_reaches_the_networks():
     study = study_fitness("dpv", "sigmoid", cfg)(genomes)
     signed = study_fitness("dpv", "sigmoid", cfg, "signed")(genomes)
     assert not torch.equal(study, signed)
-    with pytest.raises(ValueError, match=r"coding must be one of \('study', 'signed'\)"):
+    with pytest.raises(ValueError, match=r"coding must be one of \('study', 'signed', 'push-pull'\)"):
         study_task("dpv", "push_pull")
+
+
+def test_the_push_pull_coding_feeds_two_nodes_per_variable_and_snn_its_own_gain():
+    assert STUDIES["dpv"].codings == STUDIES["dpnv"].codings == CODINGS  # the CLI offers what the study has
+    for variant, scales in (("dpv", (4.8, 2.0, 0.52, 2.0, 0.52, 2.0)), ("dpnv", (4.8, 0.52, 0.52))):
+        assert study_task(variant, "push-pull").observation_high == scales
+        for kind in ("snn", "sigmoid"):
+            spec = study_spec(variant, kind, "push-pull")
+            assert (spec.input_coding, spec.clip_inputs) == ("push_pull", False)
+            assert study_config(variant, kind, coding="push-pull").num_inputs == 2 * len(scales)
+    snn, signed = study_spec("dpnv", "snn", "push-pull"), study_spec("dpnv", "snn", "signed")
+    assert snn.i_input_max == PUSH_PULL_INPUT_NA != signed.i_input_max
+    assert replace(snn, input_coding="signed", i_input_max=signed.i_input_max) == signed  # nothing else differs
+    # the gain reaches the spiking networks: the same genomes score otherwise at the signed coding's gain
+    cfg = study_config("dpnv", "snn", coding="push-pull", pop_size=16)
+    genomes = NEAT(cfg, seeds=[4]).ask()
+    pushed = study_fitness("dpnv", "snn", cfg, "push-pull")(genomes)
+    low_gain = TaskFitness(study_task("dpnv", "push-pull"), cfg, replace(snn, i_input_max=signed.i_input_max))(genomes)
+    assert pushed.shape == (1, 16) and not torch.equal(pushed, low_gain)
+
+
+def test_reproduce_dpnv_with_the_push_pull_coding_records_it_in_the_report(tmp_path):
+    out = tmp_path / "pp"
+    r = run_controller("dpnv", "snn", [0], 2, out, progress=False, coding="push-pull",
+                       ga="neat-1.2.1-dpnv-per-gene", fitness_starts=2)
+    assert r.extra["coding"] == "push-pull" and r.config.num_inputs == 6
+    with pytest.raises(ReproduceError, match=r"written with coding='push-pull', this call asks for coding='signed'"):
+        run_controller("dpnv", "snn", [0], 2, out, progress=False, resume=True, coding="signed",
+                       ga="neat-1.2.1-dpnv-per-gene", fitness_starts=2)
+    write_study_report({"snn": r}, "dpnv", out, command="test", generalization=False)
+    md = (out / "dpnv.md").read_text()
+    assert "Input coding: push-pull" in md and "300 nA per unit" in md and "4.8, 0.52, 0.52" in md
+    assert "Input coding: signed" not in md
+    with pytest.raises(ReproduceError, match=r"coding must be one of \('study', 'signed'\) for table2"):
+        run_controller("table2", "snn", [0], 1, tmp_path / "t2", progress=False, coding="push-pull")
 
 
 def test_reproduce_with_the_signed_coding_records_it_and_resumes_only_with_it(tmp_path):
