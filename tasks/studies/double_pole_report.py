@@ -159,12 +159,11 @@ def format_study_markdown(summary: dict, command: str) -> str:
         lines += ["", f"Fitness: the mean damping fitness over {k} episodes, from the standard start and {k - 1} fixed "
                   f"random starts within Gruau's ranges (`--fitness-starts {k}`); one evaluation is one genome of "
                   f"{k} episodes, so a run's episodes are {k} times its evaluations."]
+    scales = ", ".join(f"{v:g}" for v in NEAT121_SCALES[variant])
     if any(row.get("coding") == "signed" for row in summary["rows"].values()):
-        scales = ", ".join(f"{v:g}" for v in NEAT121_SCALES[variant])
         lines += ["", f"Input coding: signed, as NEAT C++ 1.2.1 feeds its networks: each observed variable divided by "
                   f"its scale ({scales}; m, m/s, rad, rad/s), centred and unclipped (`--coding signed`)."]
     if any(row.get("coding") == "push-pull" for row in summary["rows"].values()):
-        scales = ", ".join(f"{v:g}" for v in NEAT121_SCALES[variant])
         lines += ["", f"Input coding: push-pull: each observed variable divided by its scale ({scales}; m, m/s, rad, "
                   f"rad/s) as NEAT C++ 1.2.1 feeds it, unclipped, on two input nodes, its positive and its negative "
                   f"part; NEAT-SNN's input neurons take {PUSH_PULL_INPUT_NA:g} nA per unit (`--coding push-pull`)."]

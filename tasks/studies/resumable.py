@@ -30,7 +30,8 @@ def open_run(path: str | os.PathLike, identity: dict, *, resume: bool, device: s
     not a silent new start, unless ``missing_ok``: one of several checkpoints a command resumes
     may not have been written yet). ``defaults``: the value an identity key had before it was
     recorded, so older checkpoints resume; for a dict-valued key (a config), a dict of the values
-    its fields had before they were added. Returns ``(neat, checkpoint)`` (``{}`` for a fresh run).
+    its fields had before they were added. ``generations`` may grow on a resume: the budget is
+    extended, and the runs not yet solved go on. Returns ``(neat, checkpoint)`` (``{}`` for a fresh run).
     The one resume check of every command (``reproduce``, ``evolve``, ``xor``)."""
     path = Path(path)
     defaults = defaults or {}
@@ -53,6 +54,8 @@ def open_run(path: str | os.PathLike, identity: dict, *, resume: bool, device: s
         written = saved.get(key, defaults.get(key))
         if isinstance(written, dict) and isinstance(defaults.get(key), dict):
             written = {**defaults[key], **written}  # fields added since it was written
+        if key == "generations" and _extends(written, value):
+            continue  # a larger budget: the unsolved runs go on where they stopped
         if written != value:
             raise ReproduceError(f"cannot resume {path}: it was written with {key}={written!r}, "
                                  f"this call asks for {key}={value!r}")
@@ -63,6 +66,13 @@ def open_run(path: str | os.PathLike, identity: dict, *, resume: bool, device: s
     if not isinstance(rows, list) or not all(isinstance(r, dict) for r in rows):
         raise CheckpointError(f"checkpoint {str(path)!r} is malformed: statistics is not a list of rows")
     return neat, data
+
+
+def _extends(written, asked) -> bool:
+    """Whether a resume asks for more generations than the checkpoint's budget. Evolution never
+    reads its budget, so a run of G generations extended to G' is the run of G' generations."""
+    ints = all(isinstance(v, int) and not isinstance(v, bool) for v in (written, asked))
+    return ints and asked > written
 
 
 class RunCheckpoint(BaseReporter):

@@ -87,6 +87,20 @@ def test_interrupted_then_resumed_equals_uninterrupted(tmp_path):
         assert torch.equal(getattr(done.champions, name), t)
 
 
+def test_a_finished_reproduction_resumed_with_a_larger_budget_equals_the_longer_run(tmp_path):
+    seeds = [5, 6, 7]
+    whole = run_controller("table2", "sigmoid", seeds, 16, tmp_path / "a", progress=False)
+    short = run_controller("table2", "sigmoid", seeds, 8, tmp_path / "b", progress=False)
+    assert short.extra["complete"] and short.solved_generation == [-1, -1, -1] != whole.solved_generation
+    longer = run_controller("table2", "sigmoid", seeds, 16, tmp_path / "b", resume=True, progress=False)
+    assert longer.generations == 16 and longer.solved_generation == whole.solved_generation
+    assert torch.equal(longer.history, whole.history) and longer.best_fitness == whole.best_fitness
+    for name, t in whole.champions.tensors().items():
+        assert torch.equal(getattr(longer.champions, name), t)
+    with pytest.raises(ReproduceError, match="written with generations=16, this call asks for generations=12"):
+        run_controller("table2", "sigmoid", seeds, 12, tmp_path / "b", resume=True, progress=False)
+
+
 def test_sigkill_midway_then_resume_gives_the_same_table(tmp_path):
     args = ["reproduce", "table2", "--runs", "3", "--generations", "12", "--seed", "40", "--quiet", "--threads", "1",
             "--no-generalization"]
