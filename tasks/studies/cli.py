@@ -311,7 +311,7 @@ class _Parser(argparse.ArgumentParser):
 
 def _add_run_options(p: argparse.ArgumentParser, *, every: int | None) -> None:
     """--resume, --checkpoint-every and --threads, as ``reproduce`` has them."""
-    p.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out (a larger --generations extends its budget)")
+    p.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out (--generations may change: a budget it has not passed)")
     p.add_argument("--checkpoint-every", type=_positive_int, default=every,
                    help="generations between checkpoints (default: "
                         + ("every 30 s, and at the end)" if every is None else f"{every})"))
@@ -411,7 +411,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "fixed random starts within Gruau's ranges (default 1: NEAT 2002's fitness; 32 gave "
                           "solutions that hold 300 of the 625 starts; one evaluation is then K episodes)")
     rep.add_argument("--out", default=None, help="output folder (default: results/TABLE)")
-    rep.add_argument("--resume", action="store_true", help="continue from the checkpoints in --out (a larger --generations extends the budget of the unsolved runs)")
+    rep.add_argument("--resume", action="store_true", help="continue from the checkpoints in --out (--generations may change the budget of the unsolved runs, to one they have not passed)")
     rep.add_argument("--checkpoint-every", type=_positive_int, default=1, help="generations between checkpoints")
     rep.add_argument("--device", default="cpu", help="torch device (default: cpu)")
     rep.add_argument("--threads", type=_positive_int, default=None, help="torch threads (default: torch's)")

@@ -30,8 +30,8 @@ def open_run(path: str | os.PathLike, identity: dict, *, resume: bool, device: s
     not a silent new start, unless ``missing_ok``: one of several checkpoints a command resumes
     may not have been written yet). ``defaults``: the value an identity key had before it was
     recorded, so older checkpoints resume; for a dict-valued key (a config), a dict of the values
-    its fields had before they were added. ``generations`` may grow on a resume: the budget is
-    extended, and the runs not yet solved go on. Returns ``(neat, checkpoint)`` (``{}`` for a fresh run).
+    its fields had before they were added. ``generations`` may change on a resume to any budget
+    the checkpoint has not passed: the runs not yet solved go on to it. Returns ``(neat, checkpoint)`` (``{}`` for a fresh run).
     The one resume check of every command (``reproduce``, ``evolve``, ``xor``)."""
     path = Path(path)
     defaults = defaults or {}
@@ -54,8 +54,8 @@ def open_run(path: str | os.PathLike, identity: dict, *, resume: bool, device: s
         written = saved.get(key, defaults.get(key))
         if isinstance(written, dict) and isinstance(defaults.get(key), dict):
             written = {**defaults[key], **written}  # fields added since it was written
-        if key == "generations" and _extends(written, value):
-            continue  # a larger budget: the unsolved runs go on where they stopped
+        if key == "generations" and _budget_fits(written, value, data["neat"].get("generation")):
+            continue  # a new budget, not yet spent: the unsolved runs go on to it
         if written != value:
             raise ReproduceError(f"cannot resume {path}: it was written with {key}={written!r}, "
                                  f"this call asks for {key}={value!r}")
@@ -68,11 +68,12 @@ def open_run(path: str | os.PathLike, identity: dict, *, resume: bool, device: s
     return neat, data
 
 
-def _extends(written, asked) -> bool:
-    """Whether a resume asks for more generations than the checkpoint's budget. Evolution never
-    reads its budget, so a run of G generations extended to G' is the run of G' generations."""
-    ints = all(isinstance(v, int) and not isinstance(v, bool) for v in (written, asked))
-    return ints and asked > written
+def _budget_fits(written, asked, done) -> bool:
+    """Whether a resume may change the budget from ``written`` to ``asked`` generations: both
+    counts, and the checkpoint (``done`` generations) not past ``asked``. Evolution never reads its
+    budget, so a run resumed with a new budget is the run that had it from the start."""
+    counts = all(isinstance(v, int) and not isinstance(v, bool) for v in (written, asked, done))
+    return counts and asked >= done
 
 
 class RunCheckpoint(BaseReporter):

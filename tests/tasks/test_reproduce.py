@@ -87,7 +87,7 @@ def test_interrupted_then_resumed_equals_uninterrupted(tmp_path):
         assert torch.equal(getattr(done.champions, name), t)
 
 
-def test_a_finished_reproduction_resumed_with_a_larger_budget_equals_the_longer_run(tmp_path):
+def test_a_reproduction_resumed_with_another_budget_equals_the_run_that_had_it(tmp_path):
     seeds = [5, 6, 7]
     whole = run_controller("table2", "sigmoid", seeds, 16, tmp_path / "a", progress=False)
     short = run_controller("table2", "sigmoid", seeds, 8, tmp_path / "b", progress=False)
@@ -98,7 +98,12 @@ def test_a_finished_reproduction_resumed_with_a_larger_budget_equals_the_longer_
     for name, t in whole.champions.tensors().items():
         assert torch.equal(getattr(longer.champions, name), t)
     with pytest.raises(ReproduceError, match="written with generations=16, this call asks for generations=12"):
-        run_controller("table2", "sigmoid", seeds, 12, tmp_path / "b", resume=True, progress=False)
+        run_controller("table2", "sigmoid", seeds, 12, tmp_path / "b", resume=True, progress=False)  # past it
+    # stopped early, a run may be given a smaller budget it has not reached yet
+    part = run_controller("table2", "sigmoid", seeds, 16, tmp_path / "c", progress=False, stop_after=4)
+    assert not part.extra["complete"]
+    cut = run_controller("table2", "sigmoid", seeds, 8, tmp_path / "c", resume=True, progress=False)
+    assert cut.generations == 8 and torch.equal(cut.history, short.history) and cut.best_fitness == short.best_fitness
 
 
 def test_sigkill_midway_then_resume_gives_the_same_table(tmp_path):
