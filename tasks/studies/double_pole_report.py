@@ -160,13 +160,15 @@ def format_study_markdown(summary: dict, command: str) -> str:
                   f"random starts within Gruau's ranges (`--fitness-starts {k}`); one evaluation is one genome of "
                   f"{k} episodes, so a run's episodes are {k} times its evaluations."]
     scales = ", ".join(f"{v:g}" for v in NEAT121_SCALES[variant])
-    if any(row.get("coding") == "signed" for row in summary["rows"].values()):
-        lines += ["", f"Input coding: signed, as NEAT C++ 1.2.1 feeds its networks: each observed variable divided by "
-                  f"its scale ({scales}; m, m/s, rad, rad/s), centred and unclipped (`--coding signed`)."]
-    if any(row.get("coding") == "push-pull" for row in summary["rows"].values()):
-        lines += ["", f"Input coding: push-pull: each observed variable divided by its scale ({scales}; m, m/s, rad, "
-                  f"rad/s) as NEAT C++ 1.2.1 feeds it, unclipped, on two input nodes, its positive and its negative "
-                  f"part; NEAT-SNN's input neurons take {PUSH_PULL_INPUT_NA:g} nA per unit (`--coding push-pull`)."]
+    codings = {  # the sentence for each coding other than the study's own
+        "signed": f"signed, as NEAT C++ 1.2.1 feeds its networks: each observed variable divided by its scale "
+                  f"({scales}; m, m/s, rad, rad/s), centred and unclipped",
+        "push-pull": f"push-pull: each observed variable divided by its scale ({scales}; m, m/s, rad, rad/s) as NEAT "
+                     f"C++ 1.2.1 feeds it, unclipped, on two input nodes, its positive and its negative part; "
+                     f"NEAT-SNN's input neurons take {PUSH_PULL_INPUT_NA:g} nA per unit"}
+    for coding, text in codings.items():
+        if any(row.get("coding") == coding for row in summary["rows"].values()):
+            lines += ["", f"Input coding: {text} (`--coding {coding}`)."]
     lines += ["", f"Evaluations = generations x population, as NEAT 2002 counts them (the champion tests are not "
               f"counted); NEAT C++ 1.2.1 counts population x (generation - 1) + the position of the first solving "
               f"genome in its generation. A run that does not solve within {budget} generations is a failure; the mean over all "
