@@ -8,7 +8,8 @@ evaluations. The fitness of a genome is its mean damping fitness from the standa
 ``starts - 1`` fixed random starts, drawn uniformly within Gruau's ranges (seed 0), not from the
 625-start grid the generalisation test uses. Prints one JSON line: solved runs, evaluations as
 NEAT 1.2.1 counts them (one evaluation is one genome, whatever its episodes), and the
-generalisation (of 625) of each solving champion. ``--network-ms`` sets the network time of a
+generalisation (of 625) of each solving champion. ``--fitness damping-both-poles`` adds the short
+pole's angle and angular velocity to the damping term. ``--network-ms`` sets the network time of a
 control step for NEAT-SNN (substeps of 0.5 ms; the plant still moves 20 ms), ``--spec`` and
 ``--cfg`` take JSON overrides of the spec and the NEAT config (the spec's ``neuron`` by preset name,
 ``snn_torch.functional.izhikevich.PRESETS``).
@@ -28,6 +29,7 @@ from evolution import NEAT, TaskFitness
 from evolution.reporters import StdOutReporter
 from snn_torch.functional.izhikevich import PRESETS
 from tasks.studies.double_pole import (
+    DPNV_EPISODE_STEPS,
     LONG_BALANCE_STEPS,
     SpeciesChampionTest,
     champions_test,
@@ -57,6 +59,8 @@ def main(argv: list[str] | None = None) -> None:
                    help="NEAT-SNN: network time per control step (ms; default the plant's 20 ms)")
     p.add_argument("--coding", default="signed", choices=("signed", "push-pull"),
                    help="the study's input coding (tasks.studies.double_pole.CODINGS)")
+    p.add_argument("--fitness", default="damping", choices=("damping", "damping-both-poles"),
+                   help="Gruau's damping fitness, or with the short pole in its damping term (tasks.double_pole)")
     p.add_argument("--spec", default="{}", help="JSON overrides of the controller spec")
     p.add_argument("--cfg", default="{}", help="JSON overrides of the NEAT config")
     p.add_argument("--ga", default="neat-1.2.1-dpnv-per-gene", help="GA preset, or 'tuned' (the study's pick)")
@@ -64,7 +68,7 @@ def main(argv: list[str] | None = None) -> None:
     a = p.parse_args(argv)
     torch.set_num_threads(1)
     seeds = list(range(a.first_seed, a.first_seed + a.seeds))
-    task = study_task("dpnv", a.coding)
+    task = study_task("dpnv", a.coding).with_fitness(a.fitness, DPNV_EPISODE_STEPS)
     if a.network_ms is not None:
         task.control_period_s = a.network_ms / 1000.0
     spec_overrides = json.loads(a.spec)
@@ -98,7 +102,7 @@ def main(argv: list[str] | None = None) -> None:
             >= GENERALIZATION_STEPS).sum(-1)[:, 0]
     evals = neat121_counts(cfg.pop_size, neat.solved_generation.tolist(), neat.solved_position.tolist())
     solved = [e for e in evals if e is not None]
-    print(json.dumps({"kind": a.kind, "ga": a.ga, "coding": a.coding, "network_ms": a.network_ms, "spec": a.spec, "cfg": a.cfg,
+    print(json.dumps({"kind": a.kind, "fitness": a.fitness, "ga": a.ga, "coding": a.coding, "network_ms": a.network_ms, "spec": a.spec, "cfg": a.cfg,
                       "generations": generations, "starts": a.starts, "seeds": f"{seeds[0]}-{seeds[-1]}", "solved": f"{len(solved)}/{len(seeds)}",
                       "mean": round(statistics.mean(solved)) if solved else None,
                       "median": statistics.median(solved) if solved else None,

@@ -18,7 +18,9 @@ over the last 100 balanced steps of ``|x| + |x_dot| + |theta1| + |theta1_dot|`` 
 term only once ``t > 100``); it rewards keeping the cart and the long pole still, so a
 controller cannot swing its way to a long balance. The task carries ``t`` and the last 100
 terms in its state and pays ``F`` as the reward of the step the episode ends in (by failure or
-at ``max_steps``), so the seam's return is exactly ``F``.
+at ``max_steps``), so the seam's return is exactly ``F``. ``fitness="damping-both-poles"`` adds
+``|theta2| + |theta2_dot|`` to ``J`` (not Gruau's): it also pays for a short pole that rings, which
+the long pole's terms do not see.
 """
 
 from __future__ import annotations
@@ -35,10 +37,13 @@ from snn_torch.functional.decode import ordered_sum
 from snn_torch.functional.portable_math import sin_cos
 
 __all__ = ["DoublePoleParams", "DEFAULT_DOUBLE_POLE", "double_pole_derivatives", "double_pole_step",
-           "double_pole_failed", "DoublePoleTask", "DAMPING_WINDOW",
+           "double_pole_failed", "DoublePoleTask", "DAMPING_WINDOW", "DAMPING_TERMS",
            "DAMPING_TOTAL_FLOOR"]
 
 DAMPING_WINDOW = 100  # steps in Gruau's damping term
+# the fitness names of DoublePoleTask, each with the plant variables its damping term sums
+# (0: no damping term; 4: x, x_dot, theta1, theta1_dot, Gruau's; 6: the short pole's as well)
+DAMPING_TERMS = {"steps": 0, "damping": 4, "damping-both-poles": 6}
 # the least sum of |x| + |x_dot| + |theta1| + |theta1_dot| (m, m/s, rad, rad/s) over the window the
 # damping term divides by (tasks/csrc/double_pole.c repeats it): a balancing controller's sum is
 # around 1 to 10; only a plant at rest to within a micro-unit reaches it
@@ -121,9 +126,11 @@ class DoublePoleTask(Task):
 
     Args:
         velocities: observe all six variables (DPV) or only x, theta1, theta2 (DPNV).
-        fitness: ``"steps"`` (control steps balanced) or ``"damping"`` (Gruau's fitness; the
+        fitness: ``"steps"`` (control steps balanced), ``"damping"`` (Gruau's fitness; the
             reward of the step the episode fails in, or of step ``max_steps``, is ``F``; every
-            other step pays 0, so a rollout must run ``max_steps`` steps, the default).
+            other step pays 0, so a rollout must run ``max_steps`` steps, the default) or
+            ``"damping-both-poles"`` (the same, with the short pole's angle and angular velocity
+            in the damping term as well).
         max_steps: episode length in control steps.
         plant: constants and limits; theta1_0: the long pole's start angle (rad).
         observation_bounds: symmetric bounds of each observed variable (m, m/s, rad, rad/s), in
@@ -141,11 +148,13 @@ class DoublePoleTask(Task):
     def __init__(self, *, velocities: bool, fitness: str = "steps", max_steps: int = 100_000,
                  plant: DoublePoleParams = DEFAULT_DOUBLE_POLE, theta1_0: float = 0.07, name: str | None = None,
                  observation_bounds: tuple[float, ...] | None = None) -> None:
-        if fitness not in ("steps", "damping"):
-            raise ValueError(f"fitness must be 'steps' or 'damping', got {fitness!r}")
+        if fitness not in DAMPING_TERMS:
+            raise ValueError(f"fitness must be one of {', '.join(map(repr, DAMPING_TERMS))}, got {fitness!r}")
         if not (isinstance(theta1_0, (int, float)) and abs(theta1_0) < plant.theta_limit):
             raise ValueError(f"theta1_0 must lie inside the failure angle {plant.theta_limit}, got {theta1_0!r}")
-        self.velocities, self.damping, self.plant = bool(velocities), fitness == "damping", plant
+        self.velocities, self.damping, self.plant = bool(velocities), fitness != "steps", plant
+        self.fitness_name = fitness  # the constructor's name (the seam's `fitness` below is "return" or "steps")
+        self.damping_terms = DAMPING_TERMS[fitness]
         self.fitness = "return" if self.damping else "steps"
         self.theta1_0, self.max_steps = float(theta1_0), max_steps
         self.control_period_s = 2 * plant.tau_s
@@ -164,7 +173,7 @@ class DoublePoleTask(Task):
         self.observation_low = tuple(-b for b in bounds)
         self.observation_high = bounds
         self.native = NativeStep(_CSRC / "double_pole.c", "double_pole", 7 + DAMPING_WINDOW, dtypes=("float64",),
-                                 params=(*astuple(plant), 2, int(self.damping), max_steps, DAMPING_WINDOW,
+                                 params=(*astuple(plant), 2, self.damping_terms, max_steps, DAMPING_WINDOW,
                                          len(self._columns), *self._columns))
         self.validate()
 
@@ -207,7 +216,7 @@ class DoublePoleTask(Task):
         if not self.damping:
             return new, (~failed).to(torch.float64), failed
         # the damping term of this step, in the slot of its step number (a ring over 100 steps)
-        jiggle = ordered_sum(plant[:, :4].abs())
+        jiggle = ordered_sum(plant[:, :self.damping_terms].abs())
         slot = (state[:, 6].long() % DAMPING_WINDOW + 7).unsqueeze(1)
         ring = new.scatter(1, slot, torch.where(failed, new.gather(1, slot).squeeze(1), jiggle).unsqueeze(1))
         # paid once: at the failure, or on reaching max_steps (a longer rollout pays nothing more)

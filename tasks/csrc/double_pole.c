@@ -3,8 +3,9 @@
    fitness). State [rows][7 + window]: x, x_dot, theta1, theta1_dot, theta2, theta2_dot, steps
    balanced, the damping ring. params: gravity, cart mass, pole 1 mass, pole 1 half length, pole 2
    mass, pole 2 half length, hinge friction, RK step (s), x limit (m), angle limit (rad), then RK
-   steps per control step, damping (0/1), max_steps, window, the number of observed variables and
-   their state columns. reward: 1 while balanced (damping 0), or, with damping, Gruau's fitness on
+   steps per control step, the damping term's variables (0: no damping; 4: x, x_dot, theta1,
+   theta1_dot, Gruau's; 6: the short pole's too), max_steps, window, the number of observed variables and
+   their state columns. reward: 1 while balanced (no damping), or, with damping, Gruau's fitness on
    the step the episode ends in (failure or max_steps) and 0 otherwise. Built with
    -ffp-contract=off, each expression in the torch function's order, sin and cos from
    portable_math.h, sums in slot order: the torch step's bits. */
@@ -72,7 +73,11 @@ int double_pole_step_f64(const double *state, const double *action, double *out,
             reward[r] = fail ? 0.0 : 1.0;
             continue;
         }
-        if (!fail) o[7 + (int64_t)in[6] % window] = ((fabs(s[0]) + fabs(s[1])) + fabs(s[2])) + fabs(s[3]);
+        if (!fail) { /* in index order from 0, as the torch step's ordered_sum (0 + a is a exactly) */
+            double jiggle = 0.0;
+            for (int64_t i = 0; i < damping; ++i) jiggle += fabs(s[i]);
+            o[7 + (int64_t)in[6] % window] = jiggle;
+        }
         const int ends = fail ? in[6] < max_steps : balanced == max_steps;
         if (!ends) {
             reward[r] = 0.0;

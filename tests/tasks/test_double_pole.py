@@ -65,13 +65,14 @@ def test_trajectories_match_esp_to_rounding():
     assert float(ours[:, [2, 4]].abs().max()) > 0.5  # random pushes made the poles move a lot
 
 
-def _esp_damping_fitness(forces):
-    """NEAT 2002's non-Markov evaluation (experiments.cpp), for a fixed sequence of forces."""
+def _esp_damping_fitness(forces, terms=4):
+    """NEAT 2002's non-Markov evaluation (experiments.cpp), for a fixed sequence of forces; ``terms=6``
+    adds the short pole's |theta2| + |theta2_dot| to each step's damping term."""
     state = [0.0, 0.0, 0.07, 0.0, 0.0, 0.0]
     jiggle, balanced = [], 0
     for stepnum in range(1, 1001):
         state = _esp_perform(forces[stepnum - 1], state)
-        jiggle.append(abs(state[0]) + abs(state[1]) + abs(state[2]) + abs(state[3]))
+        jiggle.append(sum(abs(v) for v in state[:terms]))
         if _esp_outside(state):
             break
         balanced += 1
@@ -104,11 +105,12 @@ def _lqr_forces(off_after):
 
 @pytest.mark.parametrize("c_kernels", ["1", "0"])
 @pytest.mark.parametrize("off_after, outcome", [(1000, "balances"), (300, "falls late"), (0, "falls early")])
-def test_damping_fitness_is_gruaus(off_after, outcome, c_kernels, monkeypatch):
+@pytest.mark.parametrize("fitness, terms", [("damping", 4), ("damping-both-poles", 6)])
+def test_damping_fitness_is_gruaus(fitness, terms, off_after, outcome, c_kernels, monkeypatch):
     monkeypatch.setenv("SNN_NEAT_C_KERNELS", c_kernels)
     forces = _lqr_forces(off_after)
-    expected, balanced = _esp_damping_fitness(forces)
-    task = DoublePoleTask.without_velocities()
+    expected, balanced = _esp_damping_fitness(forces, terms)
+    task = DoublePoleTask.without_velocities(fitness=fitness)
     state = task.reset(1, None)
     total, steps = 0.0, 0
     for t in range(1000):
@@ -145,15 +147,15 @@ def test_a_plant_held_at_rest_scores_a_finite_damping_fitness_on_both_paths():
     assert torch.isfinite(paid).all() and paid[1] < 1.0
 
 
-@pytest.mark.parametrize("velocities", [True, False])
-def test_the_native_step_is_the_torch_step_bit_for_bit(velocities):
+@pytest.mark.parametrize("velocities, fitness", [(True, "steps"), (False, "damping"), (False, "damping-both-poles")])
+def test_the_native_step_is_the_torch_step_bit_for_bit(velocities, fitness):
     """The native step (tasks/csrc/double_pole.c) against the torch definition, step by step from
     all 625 generalisation starts under the LQR law with noise (a few start states fail, most
     balance 600 steps): the same bits (sin and cos from portable_math, sums in slot order)."""
     from evolution.kernels.native_plant import native_plant
     from tasks.studies.generalization import generalization_starts
 
-    task = DoublePoleTask(velocities=velocities, fitness="steps" if velocities else "damping", max_steps=600)
+    task = DoublePoleTask(velocities=velocities, fitness=fitness, max_steps=600)
     plant = native_plant(task, torch.float64)
     assert plant is not None, "the native step must build here (CI has a C compiler)"
     gains = torch.tensor(_lqr_gains(), dtype=torch.float64)
