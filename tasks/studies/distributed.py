@@ -93,7 +93,9 @@ def shard_seeds(seeds: Sequence[int], shards: int) -> list[list[int]]:
 def merge_runs(parts: Sequence[ControllerRuns]) -> ControllerRuns:
     """The shards' results as one :class:`ControllerRuns`, runs in the order of ``parts``:
     per-run lists concatenated, ``history`` along its run axis, ``champions`` along the run
-    axis, ``wall_s`` summed (CPU time over the shards, not elapsed time), ``config`` kept."""
+    axis, ``wall_s`` summed (CPU time over the shards, not elapsed time), the CPU seconds of
+    evolution and of the solution test (``extra``) summed where every shard has them, ``config``
+    kept."""
     if not parts:
         raise ReproduceError("no shard results to merge")
     first = parts[0]
@@ -108,6 +110,9 @@ def merge_runs(parts: Sequence[ControllerRuns]) -> ControllerRuns:
              "champion_test": first.extra.get("champion_test", "champion"),
              "fitness_starts": first.extra.get("fitness_starts", 1),
              "solved_position": [q for p in parts for q in p.extra.get("solved_position", [-1] * len(p.seeds))]}
+    for key in ("cpu_s", "solve_test_cpu_s"):  # a shard without the figure (an old checkpoint) leaves it unknown
+        if all(key in p.extra for p in parts):
+            extra[key] = sum(p.extra[key] for p in parts)
     return ControllerRuns(controller=first.controller, seeds=[s for p in parts for s in p.seeds],
                           generations=first.generations,
                           solved_generation=[g for p in parts for g in p.solved_generation],

@@ -155,6 +155,11 @@ def test_merged_shards_equal_one_batch(reference, tmp_path):
     _assert_same(merged, reference)
     assert merged.history.shape == (GENERATIONS, len(SEEDS))
     assert merged.wall_s == pytest.approx(sum(p.wall_s for p in parts))
+    for key in ("cpu_s", "solve_test_cpu_s"):  # the report's cost row: every shard's CPU seconds
+        assert merged.extra[key] == pytest.approx(sum(p.extra[key] for p in parts))
+    assert merged.extra["cpu_s"] > 0
+    del parts[1].extra["cpu_s"]  # a shard that does not know its CPU time: the sum is unknown, not short
+    assert "cpu_s" not in merge_runs(parts).extra
 
 
 def test_ray_equals_local(cluster, reference, tmp_path, capsys):
