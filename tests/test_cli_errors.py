@@ -50,6 +50,7 @@ def _one_line_error(capsys, argv, match):
     (["reproduce", "dpv", "--fitness-starts", "4"], "fitness_starts must be 1 for dpv (a fitness over several "
                                                       "starts only for dpnv), got 4"),
     (["reproduce", "table2", "--champion-test", "species"], "'species' only for dpnv"),
+    (["reproduce", "dpv", "--fitness", "damping-both-poles"], "'damping-both-poles' only for dpnv"),
 ])
 def test_bad_options_are_one_line_before_any_work(argv, match, capsys, tmp_path):
     out = tmp_path / "out"

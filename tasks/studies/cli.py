@@ -22,6 +22,7 @@ from tasks.studies.registry import GA_CHOICES, STUDIES  # noqa: E402
 
 CODINGS = tuple(dict.fromkeys(c for s in STUDIES.values() for c in s.codings))
 CHAMPION_TESTS = tuple(dict.fromkeys(t for s in STUDIES.values() for t in s.champion_tests))
+FITNESSES = tuple(dict.fromkeys(f for s in STUDIES.values() for f in s.fitnesses))
 
 
 def _positive_float(text: str) -> float:
@@ -176,7 +177,7 @@ def _configs(args: argparse.Namespace) -> list:
     coding = getattr(args, "coding", "study")
     if args.command == "reproduce":  # options the study does not offer stop here, before any work
         for c in controllers:
-            STUDIES[table].check(c, coding, args.champion_test, args.fitness_starts)
+            STUDIES[table].check(c, coding, args.champion_test, args.fitness_starts, args.fitness)
     return [STUDIES[table].config(c, self_loops=args.self_loops, ga=args.ga, coding=coding) for c in controllers]
 
 
@@ -254,7 +255,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     results = {}
     common = dict(resume=args.resume, self_loops=args.self_loops, ga=args.ga, checkpoint_every=args.checkpoint_every,
                   device=args.device, progress=not args.quiet, coding=args.coding, champion_test=args.champion_test,
-                  fitness_starts=args.fitness_starts)
+                  fitness_starts=args.fitness_starts, fitness=args.fitness)
     with OutputLock(args.out, command):
         _clean(args.out)
         if args.resume and not _reproduce_checkpoints(args):
@@ -410,6 +411,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="dpnv only: the damping fitness averaged over K episodes, from the standard start and K-1 "
                           "fixed random starts within Gruau's ranges (default 1: NEAT 2002's fitness; 32 gave "
                           "solutions that hold 300 of the 625 starts; one evaluation is then K episodes)")
+    rep.add_argument("--fitness", choices=FITNESSES, default=FITNESSES[0],
+                     help="dpnv only: the fitness evolved on: 'study' (default: Gruau's damping fitness, whose damping "
+                          "term sums x, x_dot, theta1 and theta1_dot) or 'damping-both-poles' (the short pole's angle "
+                          "and angular velocity in the damping term too: NEAT-SNN's controllers then stop ringing "
+                          "the short pole)")
     rep.add_argument("--out", default=None, help="output folder (default: results/TABLE)")
     rep.add_argument("--resume", action="store_true", help="continue from the checkpoints in --out (--generations may change the budget of the unsolved runs, to one they have not passed)")
     rep.add_argument("--checkpoint-every", type=_positive_int, default=1, help="generations between checkpoints")

@@ -108,7 +108,7 @@ def merge_runs(parts: Sequence[ControllerRuns]) -> ControllerRuns:
     extra = {"complete": all(p.extra.get("complete", True) for p in parts), "shards": len(parts),
              "ga": first.extra.get("ga", ""), "coding": first.extra.get("coding", "study"),
              "champion_test": first.extra.get("champion_test", "champion"),
-             "fitness_starts": first.extra.get("fitness_starts", 1),
+             "fitness_starts": first.extra.get("fitness_starts", 1), "fitness": first.extra.get("fitness", "study"),
              "solved_position": [q for p in parts for q in p.extra.get("solved_position", [-1] * len(p.seeds))]}
     for key in ("cpu_s", "solve_test_cpu_s"):  # a shard without the figure (an old checkpoint) leaves it unknown
         if all(key in p.extra for p in parts):
@@ -162,7 +162,7 @@ def shard_layout(out: str | os.PathLike, controller: str, seeds: Sequence[int], 
 
 def _run_shard(task_name: str, shard: Shard, generations: int, self_loops: bool, checkpoint_every: int,
                device: str, threads: int | None, ga: str = "tuned", coding: str = "study",
-               champion_test: str | None = None, fitness_starts: int = 1) -> ControllerRuns:
+               champion_test: str | None = None, fitness_starts: int = 1, fitness: str = "study") -> ControllerRuns:
     """Run (or continue) one shard; what a Ray task runs, and what the local path runs."""
     if threads is not None:
         torch.set_num_threads(threads)
@@ -173,7 +173,8 @@ def _run_shard(task_name: str, shard: Shard, generations: int, self_loops: bool,
     # retried task must continue from the checkpoint its killed predecessor left.
     return run_controller(task_name, shard.controller, shard.seeds, generations, shard.folder, resume=True,
                           self_loops=self_loops, ga=ga, checkpoint_every=checkpoint_every, device=device,
-                          progress=False, coding=coding, champion_test=champion_test, fitness_starts=fitness_starts)
+                          progress=False, coding=coding, champion_test=champion_test, fitness_starts=fitness_starts,
+                          fitness=fitness)
 
 
 def _finished_line(task_name: str, shard: Shard, count: int, r: ControllerRuns, done: int, total: int) -> str:
@@ -187,14 +188,14 @@ def run_controller_sharded(task_name: str, controller: str, seeds: list[int], ge
                            self_loops: bool = False, ga: str = "tuned", checkpoint_every: int = 1,
                            device: str | torch.device = "cpu", progress: bool = True,
                            coding: str = "study", champion_test: str | None = None,
-                           fitness_starts: int = 1) -> ControllerRuns:
+                           fitness_starts: int = 1, fitness: str = "study") -> ControllerRuns:
     """Like :func:`run_controller`, but shard by shard in this process, following the
     manifest in ``OUT/shards`` (how ``--resume`` without ``--ray`` completes a Ray run)."""
     layout = shard_layout(out, controller, seeds, shards, resume=resume)
     parts = []
     for shard in layout:
         parts.append(_run_shard(task_name, shard, generations, self_loops, checkpoint_every, str(device), None, ga,
-                                coding, champion_test, fitness_starts))
+                                coding, champion_test, fitness_starts, fitness))
         if progress:
             print(_finished_line(task_name, shard, len(layout), parts[-1], len(parts), len(layout)), file=sys.stderr)
     return merge_runs(parts)
@@ -275,7 +276,8 @@ def run_controllers_on_ray(task_name: str, controllers: Sequence[str], seeds: li
                            resume: bool = False, self_loops: bool = False, ga: str = "tuned", checkpoint_every: int = 1,
                            device: str = "cpu", progress: bool = True, max_retries: int = 3,
                            cpus_per_shard: int = 1, coding: str = "study",
-                           champion_test: str | None = None, fitness_starts: int = 1) -> dict[str, ControllerRuns]:
+                           champion_test: str | None = None, fitness_starts: int = 1,
+                           fitness: str = "study") -> dict[str, ControllerRuns]:
     """Evolve ``seeds`` of every controller as Ray tasks on the cluster at ``address``
     (``"auto"`` or ``"HOST:PORT"``), one task per shard, all controllers' shards in flight
     together; returns each controller's merged results, equal to :func:`run_controller`'s.
@@ -317,7 +319,7 @@ def run_controllers_on_ray(task_name: str, controllers: Sequence[str], seeds: li
         for layout in layouts.values():
             for shard in layout:
                 refs[remote.remote(task_name, shard, generations, self_loops, checkpoint_every, str(device),
-                                   cpus_per_shard, ga, coding, champion_test, fitness_starts)] = shard
+                                   cpus_per_shard, ga, coding, champion_test, fitness_starts, fitness)] = shard
         total = len(refs)
         results: dict[tuple[str, int], ControllerRuns] = {}
         finished: list[Shard] = []

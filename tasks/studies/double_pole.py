@@ -44,7 +44,8 @@ from tasks.studies.generalization import (
 from tasks.studies.registry import CONTROLLERS, STUDIES, ga_overrides
 
 __all__ = ["LONG_BALANCE_STEPS", "GENERALIZATION_PASS", "champion_solves", "champions_pass", "champions_test", "SpeciesChampionTest", "species_champion_test", "VARIANTS", "CODINGS", "PUSH_PULL_INPUT_NA", "NEAT121_SCALES", "POPULATION", "OBSERVATION_BOUNDS", "PUBLISHED", "study_task", "study_spec", "study_config",
-           "study_fitness", "study_solved", "damping_fitness_starts", "FITNESS_STARTS_SEED"]
+           "study_fitness", "study_solved", "damping_fitness_starts", "FITNESS_STARTS_SEED",
+           "FITNESSES"]
 
 VARIANTS = ("dpv", "dpnv")
 # How observations reach the networks: "study": [0, 1] over OBSERVATION_BOUNDS (the study as first
@@ -65,6 +66,11 @@ LONG_BALANCE_STEPS = 100_000  # NEAT 2002: a champion must first balance this lo
 GENERALIZATION_PASS = 200  # NEAT 2002: of the 625 generalisation starts, a DPNV solution balances this many
 DPNV_EPISODE_STEPS = 1000  # Gruau's damping fitness is measured over 1000 steps
 FITNESS_STARTS_SEED = 0  # the random starts of a multi-start DPNV fitness (damping_fitness_starts)
+# The fitnesses a study evolves on: "study", the variant's own (DPV: steps balanced; DPNV: Gruau's
+# damping fitness), or for DPNV "damping-both-poles", whose damping term also sums the short pole's
+# angle and angular velocity. Picked for NEAT-SNN on tuning seeds 5010-5024 (docs/beyond-the-paper.md):
+# its unsolved controllers' short pole rings under a chattering force, which Gruau's term cannot see.
+FITNESSES = ("study", "damping-both-poles")
 
 # Published figures, each with its source. ``evaluations``: mean evaluations to solve;
 # ``generalization``: mean of the 625 starts balanced by the solutions; ``population``.
@@ -175,12 +181,21 @@ def damping_fitness_starts(task: DoublePoleTask, starts: int, seed: int = FITNES
 
 
 def study_fitness(variant: str, controller: str, config: NEATConfig, coding: str = "study", *,
-                  fitness_starts: int = 1) -> TaskFitness:
+                  fitness_starts: int = 1, fitness: str = "study") -> TaskFitness:
     """``fitness_fn(genomes) -> [R, P]``: steps balanced (DPV) or the damping fitness (DPNV).
     ``fitness_starts`` (DPNV only): the mean damping fitness over that many episodes, from
-    ``damping_fitness_starts`` (1: the standard start alone, NEAT 2002's fitness)."""
+    ``damping_fitness_starts`` (1: the standard start alone, NEAT 2002's fitness). ``fitness``
+    (``FITNESSES``): ``"study"``, the variant's own, or (DPNV only) ``"damping-both-poles"``,
+    Gruau's damping fitness with the short pole's angle and angular velocity in its damping term
+    (``tasks.double_pole.DAMPING_TERMS``)."""
     _check(variant, controller, coding)
+    if fitness not in FITNESSES:
+        raise ValueError(f"fitness must be one of {FITNESSES}, got {fitness!r}")
+    if fitness != "study" and variant != "dpnv":
+        raise ValueError(f"fitness: only dpnv offers {fitness!r}, got it for {variant}")
     task, spec = study_task(variant, coding), study_spec(variant, controller, coding)
+    if fitness != "study":
+        task = task.with_fitness(fitness, DPNV_EPISODE_STEPS)
     if fitness_starts == 1:
         return TaskFitness(task, config, spec)
     if variant != "dpnv":

@@ -90,6 +90,8 @@ def study_rows(results: dict[str, ControllerRuns], variant: str, *, generalizati
             row["champion_test"] = r.extra["champion_test"]
         if r.extra.get("fitness_starts", 1) != 1:
             row["fitness_starts"] = r.extra["fitness_starts"]
+        if r.extra.get("fitness", "study") != "study":
+            row["fitness"] = r.extra["fitness"]
         for key, values in (("hidden_nodes", hidden), ("connections", conns), *(
                 (k, tests[k]) for k in ("generalization", "generalization_static_map") if k in tests)):
             row[f"{key}_mean_all"] = _mean(values)
@@ -159,6 +161,10 @@ def format_study_markdown(summary: dict, command: str) -> str:
         lines += ["", f"Fitness: the mean damping fitness over {k} episodes, from the standard start and {k - 1} fixed "
                   f"random starts within Gruau's ranges (`--fitness-starts {k}`); one evaluation is one genome of "
                   f"{k} episodes, so a run's episodes are {k} times its evaluations."]
+    if any(row.get("fitness") == "damping-both-poles" for row in summary["rows"].values()):
+        lines += ["", "Fitness: Gruau's damping fitness with the short pole's angle and angular velocity added to its "
+                  "damping term, which sums |x|, |x_dot|, |theta1| and |theta1_dot| over the last 100 steps "
+                  "(`--fitness damping-both-poles`)."]
     scales = ", ".join(f"{v:g}" for v in NEAT121_SCALES[variant])
     codings = {  # the sentence for each coding other than the study's own
         "signed": f"signed, as NEAT C++ 1.2.1 feeds its networks: each observed variable divided by its scale "

@@ -94,7 +94,8 @@ class Study:
         module: the module implementing ``study_task(name, coding)``, ``study_spec(name, controller,
             coding)``, ``study_config(name, controller, *, self_loops, ga, coding, **overrides)`` (``ga``:
             a preset of ``GA_PRESETS``), ``study_fitness(name, controller, config, coding)`` (with
-            ``fitness_starts=K`` where it offers ``multi_start_fitness``) and
+            ``fitness_starts=K`` where it offers ``multi_start_fitness``, ``fitness=NAME`` where it
+            offers more than one of ``fitnesses``) and
             ``study_solved(name, controller, config, coding, *, neat=None)`` (None where the config's
             fitness threshold decides).
         tuned_ga: each controller's GA (``--ga tuned``): ``(preset, extra NEATConfig overrides)``.
@@ -104,6 +105,7 @@ class Study:
         champion_tests: the tests of a generation it offers (``--champion-test``); the first is the default.
         multi_start_fitness: whether its fitness can run over several starts (``--fitness-starts``;
             ``study_fitness(..., fitness_starts=K)``); otherwise only the one start of its own.
+        fitnesses: the fitnesses it evolves on (``--fitness``); the first, ``"study"``, is its own.
     """
 
     name: str
@@ -114,6 +116,7 @@ class Study:
     codings: tuple[str, ...] = ("study", "signed")
     champion_tests: tuple[str, ...] = ("champion",)
     multi_start_fitness: bool = False
+    fitnesses: tuple[str, ...] = ("study",)
     _cache: dict = field(default_factory=dict, compare=False, repr=False)
 
     def _impl(self):
@@ -122,7 +125,7 @@ class Study:
         return self._cache["module"]
 
     def check(self, controller: str, coding: str = "study", champion_test: str | None = None,
-              fitness_starts: int = 1) -> str:
+              fitness_starts: int = 1, fitness: str = "study") -> str:
         """``ReproduceError`` naming the option the study does not offer; returns the champion test
         (``champion_test``, or the study's default: its first)."""
         if isinstance(fitness_starts, bool) or not isinstance(fitness_starts, int) or fitness_starts < 1:
@@ -131,6 +134,11 @@ class Study:
             offered = [s.name for s in STUDIES.values() if s.multi_start_fitness]
             raise ReproduceError(f"fitness_starts must be 1 for {self.name} (a fitness over several starts only for "
                                  f"{', '.join(offered)}), got {fitness_starts!r}")
+        if fitness not in self.fitnesses:
+            offered = {f: [s.name for s in STUDIES.values() if f in s.fitnesses]
+                       for s in STUDIES.values() for f in s.fitnesses if f != "study"}
+            only = "".join(f" ({f!r} only for {', '.join(names)})" for f, names in offered.items())
+            raise ReproduceError(f"fitness must be one of {self.fitnesses}{only}, got {fitness!r} for {self.name}")
         champion_test = self.champion_tests[0] if champion_test is None else champion_test
         if controller not in CONTROLLERS:
             raise ReproduceError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
@@ -173,11 +181,14 @@ class Study:
         return self._impl().study_config(self.name, controller, self_loops=self_loops, ga=preset, coding=coding,
                                          **{**extra, **overrides})
 
-    def fitness(self, controller: str, config, coding: str = "study", fitness_starts: int = 1):
+    def fitness(self, controller: str, config, coding: str = "study", fitness_starts: int = 1,
+                fitness: str = "study"):
         """``fitness_fn(genomes) -> [R, P]``; ``fitness_starts``: episodes per evaluation, where the
-        study offers it (``multi_start_fitness``)."""
-        self.check(controller, coding, fitness_starts=fitness_starts)
+        study offers it (``multi_start_fitness``); ``fitness``: one of its ``fitnesses``."""
+        self.check(controller, coding, fitness_starts=fitness_starts, fitness=fitness)
         extra = {} if fitness_starts == 1 else {"fitness_starts": fitness_starts}
+        if fitness != "study":
+            extra["fitness"] = fitness
         return self._impl().study_fitness(self.name, controller, config, coding, **extra)
 
     def solved(self, controller: str, config, coding: str = "study", *, champion_test: str | None = None,
@@ -209,6 +220,7 @@ _NEAT_CPP = ("neat-c++", MappingProxyType({}))
 _PAPER_REPORT = "tasks.studies.table_report:write_table_report"
 _DOUBLE_POLE_REPORT = "tasks.studies.double_pole_report:write_study_report"
 _DOUBLE_POLE_CODINGS = ("study", "signed", "push-pull")  # tasks.studies.double_pole.CODINGS (tested equal)
+_DPNV_FITNESSES = ("study", "damping-both-poles")  # tasks.studies.double_pole.FITNESSES (tested equal)
 
 STUDIES: Mapping[str, Study] = MappingProxyType({s.name: s for s in (
     Study("table1", "Markov cart-pole (Table I): x, x_dot, theta, theta_dot as Bernoulli-coded input spikes, "
@@ -226,12 +238,14 @@ STUDIES: Mapping[str, Study] = MappingProxyType({s.name: s for s in (
     # DPNV's test of a generation: NEAT C++ 1.2.1's ("species": the champion of the best species not
     # tested since it improved), or each generation's overall champion ("champion", the default
     # before 2026-12-03, which retests the same genome while it stays the best); its damping fitness
-    # can be the mean over several starts (--fitness-starts, docs/beyond-the-paper.md)
+    # can be the mean over several starts (--fitness-starts, docs/beyond-the-paper.md) and see the short
+    # pole (--fitness damping-both-poles)
     Study("dpnv", "double-pole balancing without velocities (NEAT 2002): x and both angles, Gruau's damping "
           "fitness over 1000 steps, population 1000, solved when a champion balances 100,000 steps and 200 of "
           "the 625 generalisation starts", "tasks.studies.double_pole",
           {"sigmoid": _NEAT_PYTHON_01, "snn": _NEAT_PYTHON_01}, _DOUBLE_POLE_REPORT,
-          codings=_DOUBLE_POLE_CODINGS, champion_tests=("species", "champion"), multi_start_fitness=True),
+          codings=_DOUBLE_POLE_CODINGS, champion_tests=("species", "champion"), multi_start_fitness=True,
+          fitnesses=_DPNV_FITNESSES),
 )})
 
 

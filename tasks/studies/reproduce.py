@@ -34,7 +34,7 @@ __all__ = ["TASKS", "ReproduceError", "ControllerRuns", "run_controller", "study
            "FIG8_MAX_PAD"]
 
 TASKS = tuple(STUDIES)
-IDENTITY_DEFAULTS = {"coding": "study", "champion_test": "champion", "fitness_starts": 1}  # checkpoints from before the key: this value
+IDENTITY_DEFAULTS = {"coding": "study", "champion_test": "champion", "fitness_starts": 1, "fitness": "study"}  # checkpoints from before the key: this value
 # Fig. 8 draws solved runs' final best up to the budget, or this many generations where the
 # budget is larger (evolution itself may go on longer; its generations are all drawn).
 FIG8_MAX_PAD = 10_000
@@ -102,7 +102,8 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
                    *, resume: bool = False, self_loops: bool = False, ga: str = "tuned", checkpoint_every: int = 1,
                    device: str | torch.device = "cpu", progress: bool = True,
                    stop_after: int | None = None, coding: str = "study",
-                   champion_test: str | None = None, fitness_starts: int = 1) -> ControllerRuns:
+                   champion_test: str | None = None, fitness_starts: int = 1,
+                   fitness: str = "study") -> ControllerRuns:
     """Evolve ``controller`` on the study ``task_name`` (``STUDIES``) for each seed (one batch),
     checkpointing to ``out``.
 
@@ -118,10 +119,12 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
     ``fitness_starts``: episodes per evaluation where the study offers it (DPNV: the mean damping
     fitness from the standard start and ``fitness_starts - 1`` fixed random starts,
     ``tasks.studies.double_pole.damping_fitness_starts``); 1, the default, is the study's own.
+    ``fitness``: one of the study's ``fitnesses`` (``"study"``, its own, the default; DPNV also
+    ``"damping-both-poles"``).
     ``stop_after`` (generations in this call) exists for tests of interruption.
     """
     s = study(task_name)
-    champion_test = s.check(controller, coding, champion_test, fitness_starts)
+    champion_test = s.check(controller, coding, champion_test, fitness_starts, fitness)
     preset, ga_extra = s.ga_choice(controller, ga)
     if checkpoint_every < 1:
         raise ReproduceError(f"checkpoint_every must be >= 1, got {checkpoint_every}")
@@ -131,12 +134,12 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
     ga_text = describe_ga(preset, ga_extra)
     identity = {"task": task_name, "controller": controller, "seeds": list(seeds), "generations": generations,
                 "self_loops": self_loops, "ga": ga_text, "coding": coding, "champion_test": champion_test,
-                "fitness_starts": fitness_starts}
+                "fitness_starts": fitness_starts, "fitness": fitness}
     neat, data = open_run(path, identity, resume=resume, device=device, missing_ok=True, defaults=IDENTITY_DEFAULTS,
                           fresh=lambda: NEAT(s.config(controller, self_loops=self_loops, ga=ga, coding=coding),
                                              seeds=seeds, device=device))
     config = neat.config
-    fitness_fn = s.fitness(controller, config, coding, fitness_starts)
+    fitness_fn = s.fitness(controller, config, coding, fitness_starts, fitness)
     solved_fn = s.solved(controller, config, coding, champion_test=champion_test, neat=neat)
     if data.get("solved_state") is not None and hasattr(solved_fn, "load_state_dict"):
         try:
@@ -175,6 +178,7 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
                           best_fitness=neat.best_fitness.cpu().tolist(), history=hist,
                           champions=neat.best_genomes.to("cpu"), config=config, wall_s=checkpoint.wall_s,
                           extra={"complete": checkpoint.finished(neat), "ga": ga_text, "coding": coding,
-                                 "champion_test": champion_test, "fitness_starts": fitness_starts, "cpu_s": cpu_before + time.process_time() - cpu_start,
+                                 "champion_test": champion_test, "fitness_starts": fitness_starts, "fitness": fitness,
+                                 "cpu_s": cpu_before + time.process_time() - cpu_start,
                                  "solve_test_cpu_s": 0.0 if timed is None else timed.cpu_s,
                                  "solved_position": neat.solved_position.cpu().tolist()})

@@ -11,6 +11,8 @@ from evolution import NEAT, TaskFitness
 from evolution.checkpoint import load_checkpoint_dict
 from tasks.studies.double_pole import (
     CODINGS,
+    DPNV_EPISODE_STEPS,
+    FITNESSES,
     LONG_BALANCE_STEPS,
     OBSERVATION_BOUNDS,
     POPULATION,
@@ -310,6 +312,52 @@ def test_reproduce_dpnv_with_fitness_starts_records_them_and_resumes_only_with_t
             run_controller("dpnv", "sigmoid", [0], 1, tmp_path / "bad", fitness_starts=bad, **kw)
     with pytest.raises(ReproduceError, match="fitness_starts must be 1 for table2"):
         run_controller("table2", "sigmoid", [0], 1, tmp_path / "t2", progress=False, fitness_starts=3)
+
+
+def test_the_both_poles_fitness_is_the_damping_fitness_that_sees_the_short_pole():
+    assert STUDIES["dpnv"].fitnesses == FITNESSES and STUDIES["dpv"].fitnesses == ("study",)
+    for kind in ("sigmoid", "snn"):
+        cfg = study_config("dpnv", kind, coding="push-pull", pop_size=12)
+        genomes = NEAT(cfg, seeds=[5]).ask()
+        task, spec = study_task("dpnv", "push-pull"), study_spec("dpnv", kind, "push-pull")
+        both = study_fitness("dpnv", kind, cfg, "push-pull", fitness="damping-both-poles")(genomes)
+        direct = TaskFitness(task.with_fitness("damping-both-poles", DPNV_EPISODE_STEPS), cfg, spec)(genomes)
+        assert torch.equal(both, direct), kind
+        # (random genomes fall before the 100 steps from which the damping term counts, so the
+        # scores match the study's here; tests/tasks/test_double_pole.py shows the terms differ)
+        assert study_fitness("dpnv", kind, cfg, "push-pull").task.fitness_name == "damping"
+        over_starts = study_fitness("dpnv", kind, cfg, "push-pull", fitness_starts=2, fitness="damping-both-poles")
+        assert over_starts.task.fitness_name == "damping-both-poles" and over_starts.episodes == 2
+    with pytest.raises(ValueError, match="only dpnv offers 'damping-both-poles'"):
+        study_fitness("dpv", "sigmoid", study_config("dpv", "sigmoid"), fitness="damping-both-poles")
+    with pytest.raises(ValueError, match="fitness must be one of"):
+        study_fitness("dpnv", "sigmoid", study_config("dpnv", "sigmoid"), fitness="damping")
+
+
+def test_reproduce_dpnv_with_the_both_poles_fitness_records_it_and_resumes_only_with_it(tmp_path):
+    out = tmp_path / "both"
+    kw = dict(progress=False, ga="neat-1.2.1-dpnv-per-gene", coding="signed")
+    r = run_controller("dpnv", "sigmoid", [0, 1], 8, out, fitness="damping-both-poles", **kw)
+    own = run_controller("dpnv", "sigmoid", [0, 1], 8, tmp_path / "own", **kw)
+    assert r.extra["fitness"] == "damping-both-poles" and own.extra["fitness"] == "study"
+    # the option reaches the fitness: seed 0's best balances past the 100 steps from which the
+    # damping term counts by generation 6
+    assert not torch.equal(r.history, own.history)
+    with pytest.raises(ReproduceError, match=r"fitness='damping-both-poles', this call asks for fitness='study'"):
+        run_controller("dpnv", "sigmoid", [0, 1], 8, out, resume=True, **kw)
+    # a checkpoint written before the option existed holds no fitness: it ran with the study's own
+    from evolution.checkpoint import atomic_torch_save
+
+    old = load_checkpoint_dict(tmp_path / "own" / "sigmoid.ckpt")
+    del old["identity"]["fitness"]
+    atomic_torch_save(old, tmp_path / "own" / "sigmoid.ckpt")
+    assert run_controller("dpnv", "sigmoid", [0, 1], 8, tmp_path / "own", resume=True, **kw).history.equal(own.history)
+    write_study_report({"sigmoid": r}, "dpnv", out, command="test", generalization=False)
+    assert "`--fitness damping-both-poles`" in (out / "dpnv.md").read_text()
+    assert json.loads((out / "summary.json").read_text())["rows"]["sigmoid"]["fitness"] == "damping-both-poles"
+    assert "fitness" not in study_rows({"sigmoid": own}, "dpnv", generalization=False)["rows"]["sigmoid"]
+    with pytest.raises(ReproduceError, match="'damping-both-poles' only for dpnv"):
+        run_controller("table2", "sigmoid", [0], 1, tmp_path / "t2", progress=False, fitness="damping-both-poles")
 
 
 def test_neat_121_presets_reach_the_study_config_through_the_registry():
