@@ -137,6 +137,10 @@ class NEATConfig:
     # multiplies their fitness by it when offspring are shared out ([NEATC]
     # ``Species::adjust_fitness``: 0.01 after ``dropoff_age`` = ``max_stagnation``).
     stagnant_fitness_factor: float = field(default=0.0, metadata=_range(0, 1))
+    # [NEATC] ``Species::adjust_fitness`` reads a species' stagnation clock before it records
+    # this generation's improvement: a species stagnant until now is still stagnant in the
+    # generation it improves. Off: the clock restarts first (a species improving now is not).
+    stagnation_clock_before: bool = False
     # Every this many generations the worst species at least ``obliterate_min_age``
     # generations old (the best one if none is) counts as stagnant from then on
     # ([NEATC] ``Population::epoch``: 30 and 20). 0: never.

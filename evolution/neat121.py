@@ -9,9 +9,7 @@ Where the presets only approximate NEAT 1.2.1 (``NEATConfig`` has no option for 
   ``mutate_toggle_enable`` picks and the first disabled gene ``mutate_gene_reenable`` enables.
 - delta coding when a run has a single species: NEAT 1.2.1 gives it ``pop - pop // 2``
   offspring (the population shrinks), ours all of them.
-- the interspecies mate a species champion (ours any species' parent), and the stagnation
-  clock read before this generation's improvement (ours after: a species improving just then
-  is not penalised).
+- the interspecies mate a species champion (ours any species' parent).
 - ``mutation_num``: NEAT 1.2.1's compatibility distance reads each gene's weight as of its
   genome's last weight mutation, and 0 for genes made since by a new node or by a link that
   another genome added first this generation; ours reads the weights.
@@ -75,7 +73,8 @@ NEAT121_DPV: dict = {
     # dropoff_age 15: Species::adjust_fitness penalises from age_debt = (age - age_of_last_improvement
     # + 1) - dropoff_age = 0 on (0 counts as 1), i.e. from 14 generations without improvement
     "max_stagnation": 14,
-    "stagnant_fitness_factor": 0.01,  # Species::adjust_fitness: fitness * 0.01 past dropoff_age
+    "stagnant_fitness_factor": 0.01,  # Species::adjust_fitness: fitness * 0.01 past dropoff_age ...
+    "stagnation_clock_before": True,  # ... by the clock before this generation's improvement (since 2026-12-05)
     "species_elitism": 0,  # no species is spared the penalty
     "obliterate_interval": 30,  # Population::epoch: every 30 generations ...
     "obliterate_min_age": 20,  # ... the worst species of age >= 20
@@ -116,6 +115,7 @@ NEAT121_DPNV_PER_GENE: dict = {
     "weight_init_stdev": 1.0,
     "conn_add_shared_weight": False,  # each new link its own weight, as when it was picked
     "survival_neatc": False,  # ceil(survival * size) parents, as when it was picked
+    "stagnation_clock_before": False,  # the clock restarted before the penalty, as when it was picked
 }
 
 _VARIANTS = {"dpv": NEAT121_DPV, "dpnv": NEAT121_DPNV}

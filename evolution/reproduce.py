@@ -104,7 +104,8 @@ def species_records(fitness: Tensor, species: Tensor, sp: SpeciesState, cfg: NEA
         pick = torch.where(ok, pos, -1).amax(1, keepdim=True)  # the worst such, -1: no species
         mark = torch.zeros_like(sp.alive).scatter_(1, torch.gather(order, 1, pick.clamp_min(0)), pick >= 0)
         obliterated = obliterated | mark
-    stagnant = sp.alive & ((generation - last >= cfg.max_stagnation) | obliterated)
+    clock = sp.last_improved if cfg.stagnation_clock_before else last  # [NEATC]: read before the update
+    stagnant = sp.alive & ((generation - clock >= cfg.max_stagnation) | obliterated)
     rank = torch.argsort(torch.argsort(torch.where(sp.alive, sf, -torch.inf), dim=1, descending=True, stable=True),
                          dim=1, stable=True)
     protected = sp.alive & (rank < cfg.species_elitism)

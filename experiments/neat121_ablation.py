@@ -43,6 +43,8 @@ ABLATIONS: dict[str, tuple[dict, str, str]] = {
                                                     "neat-1.2.1"),
     "- each new link its own weight (no innovation list)": ({"conn_add_shared_weight": False}, "signed", "neat-1.2.1"),
     "- ceil(s * size) parents per species (ours)": ({"survival_neatc": False}, "signed", "neat-1.2.1"),
+    "- stagnation clock restarted before the penalty (ours)": ({"stagnation_clock_before": False}, "signed",
+                                                               "neat-1.2.1"),
     "+ first fit against champions (NEAT 1.2.1's speciation)": ({"speciate_neatc": True}, "signed", "neat-1.2.1"),
     "- the study's coding ([0, 1] over its bounds)": ({}, "study", "neat-1.2.1"),
     "the study's tuned GA, signed coding": ({}, "signed", "tuned"),

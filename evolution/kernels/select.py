@@ -145,7 +145,8 @@ def _offspring(fitness: Tensor, species: Tensor, alive: Tensor, best_fitness: Te
                           created.data_ptr(), o_in.data_ptr(), rb_in.data_ptr(), rs_in.data_ptr(), R, P, S,
                           int(generation), int(cfg.max_stagnation), int(cfg.species_elitism),
                           float(cfg.stagnant_fitness_factor), int(cfg.obliterate_interval),
-                          int(cfg.obliterate_min_age), int(cfg.population_stagnation), best.data_ptr(),
+                          int(cfg.obliterate_min_age), int(cfg.population_stagnation),
+                          int(cfg.stagnation_clock_before), best.data_ptr(),
                           last.data_ptr(), obl.data_ptr(), run_best_out.data_ptr(), run_stale_out.data_ptr(),
                           survivors.data_ptr(), counts.data_ptr(), delta.data_ptr(), torch.get_num_threads())
     return {"best_fitness": best, "last_improved": last, "obliterated": obl.bool(), "run_best": run_best_out,

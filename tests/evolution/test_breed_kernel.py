@@ -90,6 +90,7 @@ NEAT121_OPTIONS = st.fixed_dictionaries({
     "toggle_enable_prob": st.sampled_from([0.0, 0.0, 0.1, 1.0]),
     "gene_reenable_prob": st.sampled_from([0.0, 0.0, 0.05, 1.0]),
     "survival_neatc": st.booleans(),
+    "stagnation_clock_before": st.booleans(),
 })
 
 

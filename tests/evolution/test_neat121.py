@@ -74,6 +74,23 @@ def test_a_stagnant_species_survives_with_its_share_cut_to_one_percent():
     assert _both(fitness, species, sp, cfg, 5)[2].tolist() == [[16, 11, 3]]
 
 
+def test_a_species_improving_after_stagnating_is_still_penalised_in_that_generation():
+    # Species 2 last improved 20 generations ago and improves now (fitness 6 > its record 5).
+    fitness, species, sp, cfg = _three_species()
+    fitness[0, 20:] = 6.0
+    cfg = dataclasses.replace(cfg, stagnant_fitness_factor=0.01)
+    state, _, counts, _ = _both(fitness, species, sp, cfg, 5)
+    assert state.last_improved.tolist() == [[5, 5, 5]] and counts.tolist() == [[8, 6, 16]]  # the clock restarts first
+    before = dataclasses.replace(cfg, stagnation_clock_before=True)  # [NEATC]: the clock as it stood
+    state, _, counts, _ = _both(fitness, species, sp, before, 5)
+    assert state.last_improved.tolist() == [[5, 5, 5]]  # recorded all the same, for the next generation
+    assert counts.tolist() == [[18, 12, 0]]  # 3 : 2 : 6 * 0.01
+    sp.last_improved[:] = torch.tensor([[0, 0, 5 - 15]])  # max_stagnation (15) generations flat: stagnant
+    assert _both(fitness, species, sp, before, 5)[2].tolist() == [[18, 12, 0]]
+    sp.last_improved[:] = torch.tensor([[0, 0, 5 - 14]])  # 14: not yet
+    assert _both(fitness, species, sp, before, 5)[2].tolist() == [[8, 6, 16]]
+
+
 def test_obliteration_marks_the_worst_old_species_for_good():
     fitness, species, sp, cfg = _three_species()
     sp.last_improved[:] = 0  # nobody stagnant
@@ -513,6 +530,7 @@ def test_the_representatives_are_the_species_champions_of_the_evaluated_generati
     ("weight_mutate_neatc", "yes"), ("recur_only_prob", 2.0), ("toggle_enable_prob", -1.0),
     ("gene_reenable_prob", float("nan")), ("conn_add_recurrence", None), ("conn_add_tries", -1),
     ("conn_add_tries", 2.5), ("speciate_neatc", 1), ("weight_init_uniform", 1), ("conn_add_shared_weight", "yes"), ("survival_neatc", 0),
+    ("stagnation_clock_before", 1),
 ])
 def test_bad_values_name_their_field(field, value):
     with pytest.raises(ConfigError, match=field):

@@ -382,7 +382,8 @@ def test_the_dpnv_per_gene_pick_is_the_neat121_file_with_its_weight_rule_and_pop
     changed = {k for k in NEAT121_DPNV if NEAT121_DPNV_PER_GENE[k] != NEAT121_DPNV[k]}
     assert changed | (NEAT121_DPNV_PER_GENE.keys() - NEAT121_DPNV.keys()) == {
         "pop_size", "weight_mutate_neatc", "weight_mutate_per_gene", "weight_mutate_rate", "weight_replace_rate",
-        "conn_add_tries", "weight_init_uniform", "weight_init_stdev", "conn_add_shared_weight", "survival_neatc"}
+        "conn_add_tries", "weight_init_uniform", "weight_init_stdev", "conn_add_shared_weight", "survival_neatc",
+        "stagnation_clock_before"}
     cfg = STUDIES["dpnv"].config("sigmoid", ga="neat-1.2.1-dpnv-per-gene", coding="signed")
     assert cfg.pop_size == 300 and cfg.weight_mutate_per_gene and not cfg.weight_mutate_neatc
     assert cfg.weight_mutate_power == NEAT121_DPNV["weight_mutate_power"] and cfg.num_inputs == 3

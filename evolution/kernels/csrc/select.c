@@ -183,7 +183,8 @@ void species_offspring(const double *fitness, const int64_t *species, const uint
                        const uint8_t *obl_in, const double *run_best_in, const int64_t *run_stale_in,
                        int64_t R, int64_t P, int64_t S, int64_t generation, int64_t max_stagnation,
                        int64_t species_elitism, double penalty, int64_t obliterate_interval,
-                       int64_t obliterate_min_age, int64_t pop_stagnation, double *best_out, int64_t *last_out,
+                       int64_t obliterate_min_age, int64_t pop_stagnation, int64_t clock_before,
+                       double *best_out, int64_t *last_out,
                        uint8_t *obl_out, double *run_best_out, int64_t *run_stale_out, uint8_t *survivors,
                        int64_t *counts, uint8_t *delta, int threads) {
     _Pragma("omp parallel for schedule(static) num_threads(threads)")
@@ -237,7 +238,8 @@ void species_offspring(const double *fitness, const int64_t *species, const uint
         }
         int any_share = 0;
         for (int64_t s = 0; s < S; ++s) {
-            const int stagnant = al[s] && (generation - last[s] >= max_stagnation || obl[s]);
+            const int64_t clock = clock_before ? last_in[r * S + s] : last[s]; /* [NEATC]: before the update */
+            const int stagnant = al[s] && (generation - clock >= max_stagnation || obl[s]);
             if (penalty > 0.0) { sv[s] = al[s]; pen[s] = stagnant && !prot[s]; }
             else { sv[s] = al[s] && (!stagnant || prot[s]); pen[s] = 0; }
         }
