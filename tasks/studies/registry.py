@@ -84,6 +84,13 @@ def describe_ga(preset: str, extra: Mapping) -> str:
     return ", ".join([preset, *(f"{k}={v:g}" for k, v in sorted(extra.items()))])
 
 
+def _only_for(attribute: str, common: str) -> str:
+    """`` ('X' only for a, b)`` for each choice of the studies' ``attribute`` but ``common``."""
+    offered = {c: [s.name for s in STUDIES.values() if c in getattr(s, attribute)]
+               for s in STUDIES.values() for c in getattr(s, attribute) if c != common}
+    return "".join(f" ({c!r} only for {', '.join(names)})" for c, names in offered.items())
+
+
 @dataclass(frozen=True)
 class Study:
     """One study of ``snn-neat reproduce``.
@@ -135,21 +142,16 @@ class Study:
             raise ReproduceError(f"fitness_starts must be 1 for {self.name} (a fitness over several starts only for "
                                  f"{', '.join(offered)}), got {fitness_starts!r}")
         if fitness not in self.fitnesses:
-            offered = {f: [s.name for s in STUDIES.values() if f in s.fitnesses]
-                       for s in STUDIES.values() for f in s.fitnesses if f != "study"}
-            only = "".join(f" ({f!r} only for {', '.join(names)})" for f, names in offered.items())
-            raise ReproduceError(f"fitness must be one of {self.fitnesses}{only}, got {fitness!r} for {self.name}")
+            raise ReproduceError(f"fitness must be one of {self.fitnesses}{_only_for('fitnesses', 'study')}, "
+                                 f"got {fitness!r} for {self.name}")
         champion_test = self.champion_tests[0] if champion_test is None else champion_test
         if controller not in CONTROLLERS:
             raise ReproduceError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
         if coding not in self.codings:
             raise ReproduceError(f"coding must be one of {self.codings} for {self.name}, got {coding!r}")
         if champion_test not in self.champion_tests:
-            offered = {t: [s.name for s in STUDIES.values() if t in s.champion_tests]
-                       for s in STUDIES.values() for t in s.champion_tests if t != "champion"}
-            only = "".join(f" ({t!r} only for {', '.join(names)})" for t, names in offered.items())
-            raise ReproduceError(f"champion_test must be one of {self.champion_tests}{only}, got {champion_test!r} "
-                                 f"for {self.name}")
+            raise ReproduceError(f"champion_test must be one of {self.champion_tests}"
+                                 f"{_only_for('champion_tests', 'champion')}, got {champion_test!r} for {self.name}")
         return champion_test
 
     def ga_choice(self, controller: str, ga: str = "tuned") -> tuple[str, dict]:

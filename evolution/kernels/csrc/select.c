@@ -184,9 +184,8 @@ void species_offspring(const double *fitness, const int64_t *species, const uint
                        int64_t R, int64_t P, int64_t S, int64_t generation, int64_t max_stagnation,
                        int64_t species_elitism, double penalty, int64_t obliterate_interval,
                        int64_t obliterate_min_age, int64_t pop_stagnation, int64_t clock_before,
-                       double *best_out, int64_t *last_out,
-                       uint8_t *obl_out, double *run_best_out, int64_t *run_stale_out, uint8_t *survivors,
-                       int64_t *counts, uint8_t *delta, int threads) {
+                       double *best_out, int64_t *last_out, uint8_t *obl_out, double *run_best_out,
+                       int64_t *run_stale_out, uint8_t *survivors, int64_t *counts, uint8_t *delta, int threads) {
     _Pragma("omp parallel for schedule(static) num_threads(threads)")
     for (int64_t r = 0; r < R; ++r) {
         const double *f = fitness + r * P;
