@@ -188,6 +188,17 @@ class NEATConfig:
     # species' champion of the parents' generation. Off: the closest representative, a random
     # member ([NP], [NEAT02]).
     speciate_neatc: bool = False
+    # [NEATC] ``Genome::mutate_add_node``'s choice of the gene to split: never one leaving a bias
+    # node; in a genome of fewer than 15 genes a walk in gene (slot) order from the first enabled
+    # one, on to the next with 0.3 each step, splitting nothing if it ends on a disabled gene; else 20
+    # random tries. Off: any enabled gene, uniformly ([NEAT02]).
+    node_add_neatc: bool = False
+    # [NEATC] ``Gene::mutation_num``: the compatibility distance's weight term reads each gene's
+    # weight as of its genome's last weight mutation (``Genomes.mutation_num``), not its weight:
+    # 0 for the genes of a new node and for a link a genome of the run already added this
+    # generation, the first such link's weight for it; the mean of the parents' for an averaged
+    # gene. Off: the weights ([NEAT02]).
+    compat_mutation_num: bool = False
     # [NEATC] ``mutate_toggle_enable_prob`` (0.1 DPNV): one random gene (slot order) flips its
     # enabled flag, but is only disabled if its source keeps another enabled gene.
     toggle_enable_prob: float = field(default=0.0, metadata=_range(0, 1))

@@ -23,7 +23,7 @@ import torch
 
 from evolution.checkpoint import CheckpointError, atomic_write_bytes
 from evolution.config import NEATConfig
-from evolution.population import Genomes, InvariantError, check_invariants
+from evolution.population import Genomes, InvariantError, check_invariants, start_mutation_num
 
 __all__ = ["GENOME_FORMAT", "GENOME_VERSION", "genome_to_dict", "genome_from_dict", "save_genome", "load_genome",
            "to_networkx", "node_kind"]
@@ -121,8 +121,10 @@ def genome_from_dict(data: dict, config: NEATConfig, *, where: str = "<dict>",
     fitness = data.get("fitness")
     if fitness is not None:
         _number(fitness, where, "fitness")
+    # the file holds no mutation_num ([NEATC]'s bookkeeping for the distance): a loaded genome's is its weights
     g = Genomes(weight=weight[None, None], conn=conn[None, None], enabled=enabled[None, None],
-                node=node[None, None], sigma=torch.tensor([[sigma]], dtype=dtype))
+                node=node[None, None], sigma=torch.tensor([[sigma]], dtype=dtype),
+                mutation_num=start_mutation_num(config, weight[None, None]))
     try:  # what the kernels and distances rely on (a feed-forward config's genome has no cycle, ...)
         check_invariants(Genomes(**{k: v.expand(1, config.pop_size, *v.shape[2:]) for k, v in g.tensors().items()}),
                          config)

@@ -10,6 +10,8 @@ genome uses (a draw is addressed by its counter).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import torch
 from torch import Tensor
 
@@ -70,7 +72,17 @@ def mutate_weights(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor, sev
     perturbed = g.weight + cfg.weight_mutate_power * noise
     new = torch.where(replace, fresh, perturbed.clamp(cfg.weight_min_value, cfg.weight_max_value))
     hit = gene_hit & g.conn
-    return Genomes(torch.where(hit, new, g.weight), g.conn, g.enabled, g.node, g.sigma)
+    # the genomes whose weights went through the rule (per gene: every active one)
+    mutated = active if cfg.weight_mutate_per_gene else active & genome_hit
+    return _weights_mutated(g, torch.where(hit, new, g.weight), mutated)
+
+
+def _weights_mutated(g: Genomes, weight: Tensor, mutated: Tensor) -> Genomes:
+    """``g`` with new weights; where ``mutated[R, P]``, ``mutation_num`` (when carried) records them
+    ([NEATC] ``mutate_link_weights`` sets every gene's ``mutation_num`` to its weight)."""
+    if g.mutation_num is None:
+        return replace(g, weight=weight)
+    return replace(g, weight=weight, mutation_num=torch.where(_bcast(mutated, weight), weight, g.mutation_num))
 
 
 def _mutate_weights_neatc(g: Genomes, cfg: NEATConfig, hit: Tensor, choice: Tensor, pair: Tensor,
@@ -91,7 +103,7 @@ def _mutate_weights_neatc(g: Genomes, cfg: NEATConfig, hit: Tensor, choice: Tens
     step = ((2.0 * pair[..., 0] - 1.0) * cfg.weight_mutate_power).to(g.weight.dtype)
     new = torch.where(choice > gauss, g.weight + step, step).clamp(cfg.weight_min_value, cfg.weight_max_value)
     change = _bcast(hit, g.weight) & g.conn & (choice > cold)
-    return Genomes(torch.where(change, new, g.weight), g.conn, g.enabled, g.node, g.sigma)
+    return _weights_mutated(g, torch.where(change, new, g.weight), hit)
 
 
 def mutate_sigma(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> Genomes:
@@ -100,14 +112,14 @@ def mutate_sigma(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> Ge
     hit = active & (rng.rand(P, dtype=torch.float64) < cfg.sigma_mutate_rate)
     new = (g.sigma + cfg.sigma_mutate_power * rng.randn(P, dtype=g.sigma.dtype))
     new = new.clamp(cfg.sigma_min_value, cfg.sigma_max_value)
-    return Genomes(g.weight, g.conn, g.enabled, g.node, torch.where(hit, new, g.sigma))
+    return replace(g, sigma=torch.where(hit, new, g.sigma))
 
 
 def mutate_toggle_enabled(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> Genomes:
     """Flip each gene's enabled flag with ``enabled_mutate_rate``."""
     P, N = g.pop_size, g.num_nodes
     flip = _bcast(active, g.conn) & g.conn & (rng.rand(P, N, N, dtype=torch.float64) < cfg.enabled_mutate_rate)
-    return Genomes(g.weight, g.conn, g.enabled ^ flip, g.node, g.sigma)
+    return replace(g, enabled=g.enabled ^ flip)
 
 
 def mutate_toggle_one(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) -> Genomes:
@@ -134,7 +146,7 @@ def mutate_toggle_one(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor) 
     first = off.to(torch.int8).argmax(-1, keepdim=True)
     fix = (again & off.any(-1)).unsqueeze(-1)
     enabled.scatter_(2, first, torch.gather(enabled, 2, first) | fix)
-    return Genomes(g.weight, g.conn, enabled.view_as(g.enabled), g.node, g.sigma)
+    return replace(g, enabled=enabled.view_as(g.enabled))
 
 
 def recurrent_slots(g: Genomes, cfg: NEATConfig) -> Tensor:
@@ -241,13 +253,20 @@ def mutate_add_connection(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tens
         src, dst, possible = _pick_for(cand, _flat(pick)[rows])
     rows, src, dst = rows[possible], src[possible], dst[possible]
     values = _flat(init)[rows]
+    first = None
+    if cfg.conn_add_shared_weight or g.mutation_num is not None:
+        first = _first_of_each_link(rows // P, loops[possible], src, dst, g.num_nodes)
     if cfg.conn_add_shared_weight:
-        values = values[_first_of_each_link(rows // P, loops[possible], src, dst, g.num_nodes)]
+        values = values[first]
     weight, conn, enabled = g.weight.clone(), g.conn.clone(), g.enabled.clone()
     _flat(weight)[rows, src, dst] = values
     _flat(conn)[rows, src, dst] = True
     _flat(enabled)[rows, src, dst] = True
-    out = Genomes(weight, conn, enabled, g.node, g.sigma)
+    out = replace(g, weight=weight, conn=conn, enabled=enabled)
+    if g.mutation_num is not None:  # [NEATC]: the generation's first such link records its weight, a later one 0
+        mnum = g.mutation_num.clone()
+        _flat(mnum)[rows, src, dst] = torch.where(first == torch.arange(rows.numel(), device=g.device), values, 0.0)
+        out = replace(out, mutation_num=mnum)
     return (out, want) if return_wanted else out
 
 
@@ -261,10 +280,63 @@ def _first_of_each_link(run: Tensor, recurrent: Tensor, src: Tensor, dst: Tensor
     return first.scatter_reduce(0, group, position, reduce="amin")[group]
 
 
+# [NEATC] Genome::mutate_add_node: a genome of fewer genes walks them in order, else draws 20 at random
+SPLIT_WALK_GENES = 15
+SPLIT_WALK_STEP = 0.3  # the walk's chance to go on to the next gene
+SPLIT_TRIES = 20
+_WALK_POWERS = [SPLIT_WALK_STEP]  # 0.3^j, j = 1..64, by repeated products (the kernel's doubles)
+for _ in range(63):
+    _WALK_POWERS.append(_WALK_POWERS[-1] * SPLIT_WALK_STEP)
+
+
+def _pick_split_neatc(conn: Tensor, enabled: Tensor, u: Tensor, first_bias: int, first_output: int
+                      ) -> tuple[Tensor, Tensor, Tensor]:
+    """[NEATC]'s choice of the gene to split, for a subset of genomes ``conn/enabled[K, N, N]``, from
+    one uniform ``u[K]``. A gene leaving a bias node (slots ``[first_bias, first_output)``) is never
+    split. With fewer than ``SPLIT_WALK_GENES`` genes, the walk starts at the first enabled gene not
+    from a bias node (slot order standing for gene order) and goes on to the next gene with
+    ``SPLIT_WALK_STEP`` each step, passing over bias genes: it ends on the k-th non-bias gene from
+    its start with probability ``0.3^k 0.7`` (k: how many of 0.3^1, 0.3^2, ... exceed u), and splits nothing if that
+    gene is disabled or there is none. Otherwise ``SPLIT_TRIES`` random genes are tried, the first
+    enabled non-bias one taken: none with probability ``(1 - m / n)^20`` (u below it; m such genes
+    of n), else the ``floor((u - fail) / (1 - fail) m)``-th of them. The breeding kernel repeats
+    these operations (``breed.c``). Returns ``(i, j, possible)``."""
+    N = conn.shape[-1]
+    src_node = torch.arange(N, device=conn.device).view(1, N, 1)
+    non_bias = (conn & ~((src_node >= first_bias) & (src_node < first_output))).flatten(1)
+    valid = non_bias & enabled.flatten(1)
+    n = conn.flatten(1).sum(1)
+    m = valid.sum(1)
+    slot_idx = torch.arange(N * N, device=conn.device)
+    # the walk: from the first valid gene, k further non-bias genes
+    start = torch.where(valid, slot_idx, N * N).amin(1)
+    k = (u.unsqueeze(1) < torch.tensor(_WALK_POWERS, dtype=torch.float64, device=u.device)).sum(1)  # u < 0.3^j
+    rank = non_bias.long().cumsum(1) - 1  # each non-bias gene's rank among them
+    start_rank = torch.gather(rank, 1, start.clamp_max(N * N - 1).unsqueeze(1)).squeeze(1)
+    target = start_rank + k
+    walk_slot = torch.searchsorted(rank.contiguous(), target.unsqueeze(1)).squeeze(1)  # first slot of that rank
+    walk_ok = (m > 0) & (target < non_bias.sum(1))
+    walk_slot = walk_slot.clamp_max(N * N - 1)
+    walk_ok = walk_ok & torch.gather(valid, 1, walk_slot.unsqueeze(1)).squeeze(1)
+    # the tries: one uniform for the exact distribution of the first valid draw of 20
+    miss = 1.0 - m.double() / n.clamp_min(1).double()
+    fail = torch.ones_like(u)
+    for _ in range(SPLIT_TRIES):  # a product, as the kernel forms it (bit for bit)
+        fail = fail * miss
+    tries_ok = (m > 0) & ~(u < fail)
+    share = torch.where(tries_ok, (u - fail) / torch.where(tries_ok, 1.0 - fail, 1.0), 0.0)
+    pick = (share * m.double()).long().clamp_max(m - 1).clamp_min(0)
+    tries_slot = torch.searchsorted(valid.long().cumsum(1), (pick + 1).unsqueeze(1)).squeeze(1).clamp_max(N * N - 1)
+    walk = n < SPLIT_WALK_GENES
+    slot = torch.where(walk, walk_slot, tries_slot)
+    return slot // N, slot % N, torch.where(walk, walk_ok, tries_ok)
+
+
 def mutate_add_node(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor,
                     reserved: Tensor | None = None, *, return_wanted: bool = False
                     ) -> tuple[Genomes, Tensor] | tuple[Genomes, Tensor, Tensor]:
-    """With ``node_add_prob``, split a random enabled gene (i, j) into i -> k -> j.
+    """With ``node_add_prob``, split a random enabled gene (i, j) into i -> k -> j (with
+    ``cfg.node_add_neatc``, the gene [NEATC] picks: ``_pick_split_neatc``).
 
     The old gene is disabled; i -> k gets weight 1 and k -> j the old weight, so the
     network's function changes little. ``k`` comes from the run's node registry
@@ -279,7 +351,10 @@ def mutate_add_node(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor,
     dst = torch.zeros_like(src)
     possible = torch.zeros(R * P, dtype=torch.bool, device=g.device)
     rows = torch.nonzero(_flat(want)).squeeze(1)
-    if rows.numel():
+    if rows.numel() and cfg.node_add_neatc:
+        src[rows], dst[rows], possible[rows] = _pick_split_neatc(_flat(g.conn)[rows], _flat(g.enabled)[rows],
+                                                                 _flat(pick)[rows], cfg.num_inputs, cfg.first_output)
+    elif rows.numel():
         src[rows], dst[rows], possible[rows] = _pick_for(_flat(g.enabled)[rows], _flat(pick)[rows])
     request = want & possible.view(R, P)
     used = g.node.any(1)
@@ -296,5 +371,10 @@ def mutate_add_node(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor,
         w[rows, i, kk], c[rows, i, kk], e[rows, i, kk] = 1.0, True, True
         w[rows, kk, j], c[rows, kk, j], e[rows, kk, j] = old_w, True, True
         _flat(node)[rows, kk] = True
-    out = Genomes(weight, conn, enabled, node, g.sigma)
+    out = replace(g, weight=weight, conn=conn, enabled=enabled, node=node)
+    if g.mutation_num is not None and rows.numel():  # [NEATC]: a new node's genes record 0
+        mnum = g.mutation_num.clone()
+        _flat(mnum)[rows, i, kk] = 0.0
+        _flat(mnum)[rows, kk, j] = 0.0
+        out = replace(out, mutation_num=mnum)
     return (out, request & ~granted, want) if return_wanted else (out, request & ~granted)

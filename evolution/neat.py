@@ -41,10 +41,11 @@ from snn_torch._malloc import keep_freed_memory
 __all__ = ["NEAT", "NEATResult", "FitnessError"]
 
 
-def _genome_fields(dtype: torch.dtype, N: int) -> list[tuple[str, tuple[int, ...], torch.dtype]]:
-    """(field, shape after the [R, K] axes, dtype) of each ``Genomes`` tensor."""
+def _genome_fields(dtype: torch.dtype, N: int, mutation_num: bool = False) -> list[tuple[str, tuple[int, ...], torch.dtype]]:
+    """(field, shape after the [R, K] axes, dtype) of each ``Genomes`` tensor (``mutation_num``
+    where the config carries it)."""
     return [("weight", (N, N), dtype), ("conn", (N, N), torch.bool), ("enabled", (N, N), torch.bool),
-            ("node", (N,), torch.bool), ("sigma", (), dtype)]
+            ("node", (N,), torch.bool), ("sigma", (), dtype)] + ([("mutation_num", (N, N), dtype)] if mutation_num else [])
 
 FitnessFn = Callable[[Genomes], Tensor]
 
@@ -340,9 +341,10 @@ class NEAT:
         R, P, N = self.num_runs, self.config.pop_size, self.config.num_nodes
         S = self.species_state.alive.shape[1] if self.species_state.alive.dim() == 2 else -1
         expect = {  # name: (tensor, shape, dtype)
-            **{f"genomes.{k}": (getattr(self.genomes, k), (R, P, *tail), dt) for k, tail, dt in _genome_fields(self.dtype, N)},
+            **{f"genomes.{k}": (getattr(self.genomes, k), (R, P, *tail), dt)
+               for k, tail, dt in _genome_fields(self.dtype, N, self.config.compat_mutation_num)},
             **{f"best_genomes.{k}": (getattr(self.best_genomes, k), (R, 1, *tail), dt)
-               for k, tail, dt in _genome_fields(self.dtype, N)},
+               for k, tail, dt in _genome_fields(self.dtype, N, self.config.compat_mutation_num)},
             "species": (self.species, (R, P), torch.long),
             "species_state.alive": (self.species_state.alive, (R, S), torch.bool),
             "species_state.rep_conn": (self.species_state.rep_conn, (R, S, N, N), torch.bool),

@@ -10,9 +10,6 @@ Where the presets only approximate NEAT 1.2.1 (``NEATConfig`` has no option for 
 - delta coding when a run has a single species: NEAT 1.2.1 gives it ``pop - pop // 2``
   offspring (the population shrinks), ours all of them.
 - the interspecies mate a species champion (ours any species' parent).
-- ``mutation_num``: NEAT 1.2.1's compatibility distance reads each gene's weight as of its
-  genome's last weight mutation, and 0 for genes made since by a new node or by a link that
-  another genome added first this generation; ours reads the weights.
 - ``mate_only_prob``: NEAT 1.2.1 still mutates a child of two identical genomes.
 - speciation: NEAT 1.2.1 puts a child into the first species (oldest first) whose champion of
   the parents' generation is within the threshold; the presets keep the closest random
@@ -39,6 +36,9 @@ NEAT121_DPV: dict = {
     "compatibility_excess_coefficient": 1.0,  # excess_coeff
     "compatibility_weight_coefficient": 0.4,  # mutdiff_coeff
     "compatibility_threshold": 3.0,  # compat_thresh
+    # Genome::compatibility's weight term reads Gene::mutation_num, each gene's weight as of its
+    # genome's last weight mutation (since 2026-12-06)
+    "compat_mutation_num": True,
     # Genome::compatibility sums, never divides by the gene count
     "compatibility_normalize_min_genes": 1_000_000_000,
     "survival_threshold": 0.2,  # survival_thresh
@@ -116,6 +116,7 @@ NEAT121_DPNV_PER_GENE: dict = {
     "conn_add_shared_weight": False,  # each new link its own weight, as when it was picked
     "survival_neatc": False,  # ceil(survival * size) parents, as when it was picked
     "stagnation_clock_before": False,  # the clock restarted before the penalty, as when it was picked
+    "compat_mutation_num": False,  # the distance reads the weights, as when it was picked
 }
 
 _VARIANTS = {"dpv": NEAT121_DPV, "dpnv": NEAT121_DPNV}

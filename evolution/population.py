@@ -8,6 +8,9 @@
   ``num_bias`` bias nodes, then outputs, then hidden slots. Inputs, bias and outputs are
   always present.
 - ``sigma[R, P]`` float: Qiu et al.'s evolved decoder gain (positive).
+- ``mutation_num[R, P, N, N]`` float, only with ``NEATConfig.compat_mutation_num`` (else None):
+  each gene's weight as of its genome's last weight mutation ([NEATC] ``Gene::mutation_num``),
+  which the compatibility distance reads instead of the weight; exactly 0 where no gene.
 
 Slot ``i`` is node ``i``'s historical marking; slot ``(i, j)`` is the connection's. So the
 same gene sits at the same place in every genome of a run.
@@ -24,7 +27,7 @@ from evolution.config import NEATConfig
 from evolution.rng import RunRNG
 from snn_torch.functional.counter_rng import mix64
 
-__all__ = ["Genomes", "initial_genomes", "random_genomes", "check_invariants", "InvariantError", "reachability"]
+__all__ = ["Genomes", "initial_genomes", "random_genomes", "start_mutation_num", "check_invariants", "InvariantError", "reachability"]
 
 
 class InvariantError(AssertionError):
@@ -40,6 +43,7 @@ class Genomes:
     enabled: Tensor
     node: Tensor
     sigma: Tensor
+    mutation_num: Tensor | None = None
 
     @property
     def num_runs(self) -> int:
@@ -58,7 +62,8 @@ class Genomes:
         return self.weight.device
 
     def tensors(self) -> dict[str, Tensor]:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        """The genome tensors by field name (``mutation_num`` only where it is carried)."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}
 
     def gather(self, index: Tensor) -> Genomes:
         """Genomes picked per run: ``index[R, K]`` -> a ``[R, K]`` population."""
@@ -176,7 +181,14 @@ def initial_genomes(config: NEATConfig, rng: RunRNG, *, dtype: torch.dtype = tor
     node = start_nodes.expand(R, P, N).clone()
     sigma = config.sigma_init_mean + config.sigma_init_stdev * rng.randn(P, dtype=dtype)
     sigma = sigma.clamp(config.sigma_min_value, config.sigma_max_value)
-    return Genomes(weight=weight, conn=conn, enabled=conn.clone(), node=node, sigma=sigma)
+    return Genomes(weight=weight, conn=conn, enabled=conn.clone(), node=node, sigma=sigma,
+                   mutation_num=start_mutation_num(config, weight))
+
+
+def start_mutation_num(config: NEATConfig, weight: Tensor) -> Tensor | None:
+    """A start genome's ``mutation_num`` (with ``config.compat_mutation_num``, else None): its
+    weights, as [NEATC]'s ``Population`` spawns the start population by a weight mutation."""
+    return weight.clone() if config.compat_mutation_num else None
 
 
 def random_genomes(config: NEATConfig, *, runs: int = 1, hidden: int = 0, density: float = 0.5, seed: int = 0,
@@ -214,7 +226,7 @@ def random_genomes(config: NEATConfig, *, runs: int = 1, hidden: int = 0, densit
                                                                              dtype=torch.float64)
     sigma = sigma.clamp(config.sigma_min_value, config.sigma_max_value)
     genomes = Genomes(weight=weight.to(dtype), conn=conn, enabled=conn.clone(), node=node.expand(R, P, N).clone(),
-                      sigma=sigma.to(dtype))
+                      sigma=sigma.to(dtype), mutation_num=start_mutation_num(config, weight.to(dtype)))
     return genomes.to(device)
 
 
@@ -252,6 +264,15 @@ def check_invariants(genomes: Genomes, config: NEATConfig) -> None:
         raise InvariantError("a weight or sigma is NaN or inf")
     if bool((g.weight[~g.conn] != 0).any()):
         raise InvariantError("a weight is non-zero where no gene exists")
+    if (g.mutation_num is not None) != config.compat_mutation_num:
+        raise InvariantError(f"mutation_num is {'carried' if g.mutation_num is not None else 'missing'} but "
+                             f"config.compat_mutation_num is {config.compat_mutation_num}")
+    if g.mutation_num is not None:
+        if g.mutation_num.shape != g.weight.shape or g.mutation_num.dtype != g.weight.dtype:
+            raise InvariantError(f"mutation_num has shape {tuple(g.mutation_num.shape)} and dtype "
+                                 f"{g.mutation_num.dtype}, expected the weights' {tuple(g.weight.shape)}, {g.weight.dtype}")
+        if not bool(torch.isfinite(g.mutation_num).all()) or bool((g.mutation_num[~g.conn] != 0).any()):
+            raise InvariantError("a mutation_num is NaN or inf, or non-zero where no gene exists")
     if bool(((g.weight < config.weight_min_value) | (g.weight > config.weight_max_value)).any()):
         raise InvariantError("a weight lies outside [weight_min_value, weight_max_value]")
     if bool(((g.sigma < config.sigma_min_value) | (g.sigma > config.sigma_max_value)).any()):

@@ -39,7 +39,7 @@ from evolution.mutate import (
 from evolution.neat121 import CLONE_LINK_PROB
 from evolution.population import Genomes
 from evolution.rng import RunRNG
-from evolution.speciate import SpeciesState
+from evolution.speciate import SpeciesState, distance_view
 
 __all__ = ["ReproductionInfo", "allocate_offspring", "share_scale", "reproduce", "select_parents", "update_stagnation",
            "species_records", "species_order", "population_stagnation", "species_offspring", "extra_draws"]
@@ -305,6 +305,7 @@ def champion_representatives(g: Genomes, fitness: Tensor, species: Tensor, sp: S
     ``runs``: ``g`` is a larger population and ``fitness``, ``species``, ``sp`` describe those runs."""
     R, P = species.shape
     S = sp.capacity
+    g = distance_view(g)
     f = fitness.to(torch.float64)
     best = torch.full((R, S), -torch.inf, dtype=torch.float64, device=f.device).scatter_reduce(1, species, f, "amax")
     first = torch.where(f == best.gather(1, species), P - torch.arange(P, device=f.device), 0)

@@ -12,7 +12,7 @@ parents' generation (set by ``reproduce``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 import torch
 from torch import Tensor
@@ -24,14 +24,15 @@ from evolution.kernels import select as select_kernel
 from evolution.population import Genomes, run_index
 from evolution.rng import RunRNG
 
-__all__ = ["SpeciesState", "empty_species", "speciate"]
+__all__ = ["SpeciesState", "empty_species", "speciate", "distance_view"]
 
 
 @dataclass
 class SpeciesState:
     """Per-run species slots, ``[R, S, ...]``.
 
-    ``alive``: the slot holds a species. ``rep_*``: its representative genome.
+    ``alive``: the slot holds a species. ``rep_*``: its representative genome, as the distance
+    reads it (``rep_weight`` holds its ``mutation_num`` where genomes carry one: ``distance_view``).
     ``best_fitness``: best member fitness ever seen. ``last_improved``, ``created``:
     generations. ``next_id`` and ``ident``: a run-wide species number, for reports.
     ``obliterated`` (``[R, S]``): marked stagnant for good (``NEATConfig.obliterate_interval``).
@@ -150,6 +151,7 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
     computing them, and take the closest representatives breeding found if it saw these
     representatives and alive flags; ignored by the tensor reference)."""
     use_kernels = breed_kernel.wanted(g, fused)
+    g = distance_view(g)
     if runs is not None and not use_kernels:
         g, runs = g.select_runs(runs), None
     # Pure: never edit the input (the representatives are only read, so they are not copied).
@@ -171,6 +173,12 @@ def speciate(g: Genomes, sp: SpeciesState, cfg: NEATConfig, rng: RunRNG, generat
                                  last_improved=sp.last_improved, created=sp.created, ident=sp.ident,
                                  next_id=sp.next_id, obliterated=obliterated, run_best=sp.run_best,
                                  run_stale=sp.run_stale)
+
+
+def distance_view(g: Genomes) -> Genomes:
+    """The genomes as the compatibility distance reads them: ``weight`` is ``mutation_num`` where
+    it is carried ([NEATC], ``NEATConfig.compat_mutation_num``), so representatives record it too."""
+    return g if g.mutation_num is None else replace(g, weight=g.mutation_num, mutation_num=None)
 
 
 def _choose_representatives(g: Genomes, species: Tensor, capacity: int, rng: RunRNG

@@ -164,7 +164,8 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
     ``cfg.mutation_exclusive`` as ``reproduce`` gates the mutations, and ``mutate_toggle_one``
     last where ``toggles_one(cfg)``. ``clones[R, P]``: delta coding's clones of a champion,
     mutated as ``reproduce`` mutates them (a new link with ``neat121.CLONE_LINK_PROB``, else
-    every weight)."""
+    every weight). ``g.mutation_num``, where carried, is bred as the reference breeds it, and the
+    closest representatives go by the children's (``speciate.distance_view``)."""
     lib = _require(g.conn, g.weight)
     (R, P), N = first.shape, g.num_nodes
     T = g.weight.dtype
@@ -198,7 +199,8 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
                  else reserved.to(torch.uint8).contiguous())
     words = (N * N + 63) // 64
     genes = GeneBits.__new__(GeneBits)
-    genes._bind(child.weight, child.sigma, dest)
+    # the distance reads mutation_num where it is carried (speciate.distance_view)
+    genes._bind(child.weight if child.mutation_num is None else child.mutation_num, child.sigma, dest)
     rep_args: list = [None] * 7 + [0, None, 0.0, None]  # reps' bits .. alive, S, coefficients, threshold, out
     rep_ident = None
     if reps is not None:
@@ -230,7 +232,10 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
         *rep_args, int(cfg.mutation_exclusive), int(cfg.weight_mutate_neatc), int(cfg.conn_add_recurrence),
         int(toggles_one(cfg)), float(cfg.toggle_enable_prob), float(cfg.gene_reenable_prob),
         _clone_link_prob(cfg), int(cfg.conn_add_tries), None if rep_ident is None else rep_ident.data_ptr(),
-        int(cfg.weight_init_uniform), int(cfg.conn_add_shared_weight), threads)
+        int(cfg.weight_init_uniform), int(cfg.conn_add_shared_weight),
+        None if g.mutation_num is None else parents["mutation_num"].data_ptr(),
+        None if g.mutation_num is None else child.mutation_num.data_ptr(),
+        cfg.num_inputs if cfg.node_add_neatc else -1, threads)
     genes.bits, genes.before, genes.count, genes.top = bits, before, count, top
     return child, request.bool() & ~granted.bool(), genes
 

@@ -41,6 +41,7 @@ from tasks.studies.generalization import (
     balanced_steps,
     generalization_starts,
 )
+from tasks.studies.neat121_runs import neat121_runs
 from tasks.studies.registry import CONTROLLERS, STUDIES, ga_overrides
 
 __all__ = ["LONG_BALANCE_STEPS", "GENERALIZATION_PASS", "champion_solves", "champions_pass", "champions_test", "SpeciesChampionTest", "species_champion_test", "VARIANTS", "CODINGS", "PUSH_PULL_INPUT_NA", "NEAT121_SCALES", "POPULATION", "OBSERVATION_BOUNDS", "PUBLISHED", "study_task", "study_spec", "study_config",
@@ -77,8 +78,9 @@ FITNESSES = ("study", "damping-both-poles")
 # [NEAT02] Stanley & Miikkulainen (2002), Evolutionary Computation 10(2), Tables 1 and 2.
 # [CoSyNE08] Gomez, Schmidhuber & Miikkulainen (2008), JMLR 9, Table 2 (see docs/beyond-the-paper.md).
 # "measured here": Stanley's NEAT C++ 1.2.1 built and run on this project's machine with its own
-# parameter files (pole2_markov.ne, p2nv.ne), 1016 and 131 runs, evaluations as it counts them
-# (``neat121_*``: population x (generation - 1) + the winner's position); recorded in issue 29.
+# parameter files (pole2_markov.ne, p2nv.ne), evaluations as it counts them (``neat121_*``:
+# population x (generation - 1) + the winner's position), run by run in tasks/studies/neat121_runs.json
+# (issue 29 first recorded 1016 and 131 runs, without the per-run figures: mean 3,605 and 30,770).
 PUBLISHED: dict[str, list[dict]] = {
     "dpv": [
         {"method": "Ev. Programming", "evaluations": 307_200, "source": "NEAT02 Table 1"},
@@ -86,8 +88,7 @@ PUBLISHED: dict[str, list[dict]] = {
         {"method": "SANE", "evaluations": 12_600, "source": "NEAT02 Table 1"},
         {"method": "ESP", "evaluations": 3_800, "source": "NEAT02 Table 1"},
         {"method": "NEAT", "evaluations": 3_600, "population": 150, "source": "NEAT02 Table 1"},
-        {"method": "NEAT C++ 1.2.1", "neat121_mean": 3_605, "neat121_median": 3_120, "failures": "11/1016",
-         "population": 150, "source": "measured here"},
+        neat121_runs("dpv").row(),
     ],
     "dpnv": [
         {"method": "Cellular Encoding", "evaluations": 840_000, "generalization": 300, "population": 16_384,
@@ -96,8 +97,7 @@ PUBLISHED: dict[str, list[dict]] = {
          "source": "NEAT02 Table 2"},
         {"method": "NEAT", "evaluations": 33_184, "generalization": 286, "population": 1_000,
          "source": "NEAT02 Table 2"},
-        {"method": "NEAT C++ 1.2.1", "neat121_mean": 30_770, "neat121_median": 23_101, "failures": "6/131",
-         "generalization": 262.6, "population": 1_000, "source": "measured here"},
+        neat121_runs("dpnv").row(),
     ],
 }
 

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from tasks.studies.double_pole import NEAT121_SCALES, PUBLISHED, PUSH_PULL_INPUT_NA, study_spec, study_task
 from tasks.studies.generalization import GENERALIZATION_STEPS, generalization_starts
+from tasks.studies.neat121_runs import compare_with_neat121
 from tasks.studies.results import (
     LABELS,
     ControllerRuns,
@@ -101,7 +102,8 @@ def study_rows(results: dict[str, ControllerRuns], variant: str, *, generalizati
             if key in tests:
                 row[name] = sum(s >= GENERALIZATION_STEPS for s in tests[key])
         rows[c] = row
-    out = {"variant": variant, "rows": rows, "runs": per_run, "published": PUBLISHED[variant]}
+    out = {"variant": variant, "rows": rows, "runs": per_run, "published": PUBLISHED[variant],
+           "against_neat121": {c: compare_with_neat121(neat121_evaluations(r), variant) for c, r in results.items()}}
     if "snn" in results and "sigmoid" in results:
         out["mann_whitney_u"] = mann_whitney(per_run["snn"]["evaluations"], per_run["sigmoid"]["evaluations"])
     return out
@@ -183,6 +185,16 @@ def format_study_markdown(summary: dict, command: str) -> str:
         mw = summary["mann_whitney_u"]
         lines.append(f"Mann-Whitney U (two-sided, evaluations, NEAT-SNN vs sigmoid NEAT, failures as budget + 1): "
                      f"U = {mw['U']:g}, p = {mw['p_value']:.3g}.")
+    if "against_neat121" in summary:  # summaries written before it was kept lack it
+        lines += ["", "Against NEAT C++ 1.2.1's own runs, run by run (its row above; evaluations as NEAT 1.2.1 counts "
+                  "them; two-sided tests):", "",
+                  "| Controller | Median (solved runs) | NEAT C++ 1.2.1's median | Mann-Whitney U, p (solved runs) | "
+                  "Failures | NEAT C++ 1.2.1's failures | Fisher's exact test, p (failures) |", "|---|---|---|---|---|---|---|"]
+        for c, cmp in summary["against_neat121"].items():
+            p = cmp.get("mann_whitney_p")
+            lines.append(f"| {LABELS.get(c, c)} | {_fmt(cmp['median'])} | {_fmt(cmp['neat121_median'])} | "
+                         f"{'-' if p is None else f'{p:.3g}'} | {cmp['failures']}/{cmp['runs']} | "
+                         f"{cmp['neat121_failures']}/{cmp['neat121_runs']} | {cmp['fisher_p']:.3g} |")
     lines += ["", "Champions of every run (all runs / solved runs):", "",
               "| Controller | Hidden nodes | Connections | Generalisation as evolved | as a static map | "
               f"Hold the standard start {GENERALIZATION_STEPS} steps: as evolved | as a static map | Wall time (s) |",

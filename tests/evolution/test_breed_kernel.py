@@ -91,6 +91,8 @@ NEAT121_OPTIONS = st.fixed_dictionaries({
     "gene_reenable_prob": st.sampled_from([0.0, 0.0, 0.05, 1.0]),
     "survival_neatc": st.booleans(),
     "stagnation_clock_before": st.booleans(),
+    "compat_mutation_num": st.booleans(),
+    "node_add_neatc": st.booleans(),
 })
 
 

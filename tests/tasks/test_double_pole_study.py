@@ -176,8 +176,15 @@ def test_evaluations_are_also_counted_as_neat_121_counts_them(tmp_path):
     assert neat121_evaluations(r) == [8, 304]
     r.extra["solved_position"] = [-1, 3]
     assert neat121_evaluations(r) == [None, 304]
-    md_rows = study_rows({"sigmoid": r}, "dpv", generalization=False)["rows"]["sigmoid"]
-    assert md_rows["evaluations_neat121_mean_solved"] == 304
+    summary = study_rows({"sigmoid": r}, "dpv", generalization=False)
+    assert summary["rows"]["sigmoid"]["evaluations_neat121_mean_solved"] == 304
+    # beside NEAT C++ 1.2.1's own runs (tasks/studies/neat121_runs.json): one solved run of 304, one failure
+    against = summary["against_neat121"]["sigmoid"]
+    assert against["median"] == 304 and against["failures"] == 1 and against["neat121_runs"] >= 100
+    assert 0.0 < against["mann_whitney_p"] < 0.5 and 0.0 < against["fisher_p"] <= 1.0
+    summary.update(seeds=[0, 1])
+    md = format_study_markdown(summary, "cmd")
+    assert "Against NEAT C++ 1.2.1's own runs" in md and f"| {against['mann_whitney_p']:.3g} | 1/2 |" in md
 
 
 def test_neat_121s_test_takes_the_best_species_not_tested_since_it_improved():
@@ -383,7 +390,7 @@ def test_the_dpnv_per_gene_pick_is_the_neat121_file_with_its_weight_rule_and_pop
     assert changed | (NEAT121_DPNV_PER_GENE.keys() - NEAT121_DPNV.keys()) == {
         "pop_size", "weight_mutate_neatc", "weight_mutate_per_gene", "weight_mutate_rate", "weight_replace_rate",
         "conn_add_tries", "weight_init_uniform", "weight_init_stdev", "conn_add_shared_weight", "survival_neatc",
-        "stagnation_clock_before"}
+        "stagnation_clock_before", "compat_mutation_num"}
     cfg = STUDIES["dpnv"].config("sigmoid", ga="neat-1.2.1-dpnv-per-gene", coding="signed")
     assert cfg.pop_size == 300 and cfg.weight_mutate_per_gene and not cfg.weight_mutate_neatc
     assert cfg.weight_mutate_power == NEAT121_DPNV["weight_mutate_power"] and cfg.num_inputs == 3

@@ -66,8 +66,44 @@ static inline int64_t pick_k(double u, int64_t n) {
     return k > n - 1 ? n - 1 : (k < 0 ? 0 : k);
 }
 
+/* [NEATC] Genome::mutate_add_node's gene to split, -1 for none: mutate.py's _pick_split_neatc, op by
+   op. Never a gene from a bias node (rows [first_bias, first_output)); under 15 genes a walk in slot
+   order from the first enabled one, on with 0.3 per step; else 20 random tries (the exact law of the
+   first good one, from the one uniform u). */
+static int64_t split_neatc(const uint8_t *c, const uint8_t *e, int64_t N, double u, int64_t first_bias,
+                           int64_t first_output) {
+    const int64_t NN = N * N;
+    int64_t n = 0, m = 0, start = -1;
+    for (int64_t s = 0; s < NN; ++s) {
+        if (!c[s]) continue;
+        ++n;
+        const int bias = s / N >= first_bias && s / N < first_output;
+        if (!bias && e[s]) { ++m; if (start < 0) start = s; }
+    }
+    if (m == 0) return -1;
+    if (n < 15) {
+        int64_t k = 0; double p = 0.3;
+        while (k < 64 && u < p) { ++k; p *= 0.3; }
+        for (int64_t s = start; s < NN; ++s) {
+            if (!c[s] || (s / N >= first_bias && s / N < first_output)) continue;
+            if (k-- == 0) return e[s] ? s : -1;
+        }
+        return -1;
+    }
+    const double miss = 1.0 - (double)m / (double)n;
+    double fail = 1.0;
+    for (int t = 0; t < 20; ++t) fail = fail * miss;
+    if (u < fail) return -1;
+    int64_t k = (int64_t)((u - fail) / (1.0 - fail) * (double)m);
+    k = k > m - 1 ? m - 1 : (k < 0 ? 0 : k);
+    for (int64_t s = 0; s < NN; ++s)
+        if (c[s] && e[s] && !(s / N >= first_bias && s / N < first_output) && k-- == 0) return s;
+    return -1;
+}
+
 #define VECTOR_REPS 3 /* species assignment: vector loops over at least this many representatives */
-enum { JOB_CONN, JOB_PERTURB, JOB_REPLACE, JOB_SIGMA, JOB_NC_PERTURB, JOB_NC_REPLACE }; /* what a phase-2 job is for */
+/* what a phase-2 job is for (JOB_CONN_LATER: a link the run's child of an earlier job added first) */
+enum { JOB_CONN, JOB_CONN_LATER, JOB_PERTURB, JOB_REPLACE, JOB_SIGMA, JOB_NC_PERTURB, JOB_NC_REPLACE };
 #define DEFINE_BREED(T, SFX)                                                                      \
 static inline T clampT_##SFX(T x, T lo, T hi) { x = x < lo ? lo : x; return x > hi ? hi : x; }   \
 /* Phase 1: crossover (or a copy of the first parent), then the add-node choice. */              \
@@ -77,7 +113,8 @@ static inline void phase1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *p
                   int64_t *src, int64_t *dst, uint8_t *request, const int64_t *keys,             \
                   const int64_t *base, const int64_t *blocks, int64_t R, int64_t P, int64_t N,   \
                   double inherit_disabled, double node_add_prob, int64_t idx0, int64_t row0,            \
-                  int64_t row1, uint64_t *gbits) {                                                \
+                  int64_t row1, uint64_t *gbits, const T *pm, T *cm, int64_t split_first_bias,     \
+                  int64_t first_output) {                                                         \
     const int64_t NN = N * N, W = (NN + 63) / 64;                                                 \
     for (int64_t row = row0; row < row1; ++row) {                                                   \
         const int64_t r = row / P, p = row % P, crow = row - row0; /* child arrays: the run's block */\
@@ -89,6 +126,10 @@ static inline void phase1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *p
         T *w = cw + crow * NN; uint8_t *c = cc + crow * NN, *e = ce + crow * NN;                  \
         memcpy(c, fc, NN); memcpy(cn + crow * N, pn + a * N, N);                                  \
         memcpy(w, fw, NN * sizeof(T)); /* no gene: weight 0 in every genome */                    \
+        /* mutation_num ([NEATC]), where carried: inherited as the weights are */                  \
+        const T *fm = pm ? pm + a * NN : NULL, *om = pm ? pm + b * NN : NULL;                     \
+        T *m = cm ? cm + crow * NN : NULL;                                                        \
+        if (m) memcpy(m, fm, NN * sizeof(T));                                                     \
         uint64_t *bits = gbits + row * W; /* the child's genes: the first parent's */             \
         pack_bits(fc, NN, W, bits);                                                               \
         int32_t genes[MAX_SLOTS];                                                                 \
@@ -109,6 +150,8 @@ static inline void phase1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *p
                 const int matching = oc[s] != 0;                                                  \
                 if (matching && avg) w[s] = (T)(fw[s] + ow[s]) / (T)2;                            \
                 else if (matching && u_from[g] < 0.5) w[s] = ow[s];                               \
+                if (m && matching && avg) m[s] = (T)(fm[s] + om[s]) / (T)2;                       \
+                else if (m && matching && u_from[g] < 0.5) m[s] = om[s];                          \
                 const int dip = !fe[s] || (matching && !oe[s]);                                   \
                 e[s] = !(dip && u_stay[g] < inherit_disabled);                                    \
             }                                                                                     \
@@ -117,7 +160,12 @@ static inline void phase1_##SFX(const T *pw, const uint8_t *pc, const uint8_t *p
             memcpy(e, fe, NN); cs[crow] = ps[a];                                                  \
         }                                                                                         \
         request[row] = 0; src[row] = 0; dst[row] = 0;                                             \
-        if (active[row] && !(active[row] & 8) && uniform01(key, b0 + blocks[B_NODE_WANT] + p) < node_add_prob) {\
+        if (active[row] && !(active[row] & 8) && uniform01(key, b0 + blocks[B_NODE_WANT] + p) < node_add_prob\
+            && split_first_bias >= 0) { /* [NEATC]'s choice */                                     \
+            const int64_t s = split_neatc(c, e, N, uniform01(key, b0 + blocks[B_NODE_PICK] + p), split_first_bias,\
+                                          first_output);                                          \
+            if (s >= 0) { src[row] = s / N; dst[row] = s % N; request[row] = 1; }                 \
+        } else if (active[row] && !(active[row] & 8) && uniform01(key, b0 + blocks[B_NODE_WANT] + p) < node_add_prob) {\
             uint64_t on[MAX_SLOTS / 64];                                                          \
             pack_bits(e, NN, W, on);                                                              \
             const int64_t n = bits_to_slots(on, W, genes);                                        \
@@ -144,14 +192,16 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
                   int64_t *gbefore, int64_t *gcount, int64_t *gtop, int exclusive,                \
                   double node_add_prob, int neatc, int recur_split, int one_on, double one_prob,   \
                   double re_prob, int64_t first_hidden, double clone_link_prob, int64_t conn_tries,\
-                  int w_uniform, int shared_link) {                                               \
+                  int w_uniform, int shared_link, T *cm) {                                        \
     const int64_t NN = N * N, W = (NN + 63) / 64;                                                 \
     const T mean = (T)w_mean, stdev = (T)w_stdev, lo = (T)w_min, hi = (T)w_max, power = (T)w_power;\
     /* weight_init_uniform: [NP]'s bounds, mean +- 2 stdev within [min, max], in double */       \
     const double u_lo = fmax(w_min, w_mean - 2.0 * w_stdev), u_hi = fmin(w_max, w_mean + 2.0 * w_stdev);\
     const int64_t max_jobs = (row1 - row0) * (NN + 3);                                            \
     /* conn_add_shared_weight: the run's first JOB_CONN of each slot (x2: drawn recurrent or not) */\
-    int64_t *first_link = shared_link ? malloc(2 * NN * sizeof(int64_t)) : NULL;                  \
+    /* (and with mutation_num: a later one records 0) */                                          \
+    int64_t *first_link = shared_link || cm ? malloc(2 * NN * sizeof(int64_t)) : NULL;            \
+    uint8_t *w_mut = cm ? calloc(row1 - row0, 1) : NULL; /* the children whose weights mutated */ \
     if (first_link) for (int64_t f = 0; f < 2 * NN; ++f) first_link[f] = -1;                      \
     uint64_t *job_counter = malloc(max_jobs * (sizeof(uint64_t) + sizeof(double) + 2 * sizeof(int32_t) + 1));\
     double *job_z = (double *)(job_counter + max_jobs);                                           \
@@ -170,6 +220,7 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
             e[i * N + j] = 0;                                                                     \
             w[i * N + k] = (T)1; c[i * N + k] = 1; e[i * N + k] = 1;                              \
             w[k * N + j] = old; c[k * N + j] = 1; e[k * N + j] = 1;                               \
+            if (cm) { cm[crow * NN + i * N + k] = 0; cm[crow * NN + k * N + j] = 0; } /* [NEATC] */ \
             nd[k] = 1;                                                                            \
             bits[(i * N + k) / 64] |= 1ULL << ((i * N + k) % 64);                                 \
             bits[(k * N + j) / 64] |= 1ULL << ((k * N + j) % 64);                                 \
@@ -260,11 +311,14 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
             }                                                                                     \
             if (s >= 0) {                                                                         \
                 job_counter[n_jobs] = b0 + blocks[B_CONN_INIT] + 2 * p; job_row[n_jobs] = (int32_t)crow;\
-                if (first_link) { /* a later one draws the first one's weight (its counter) */    \
+                int later = 0;                                                                    \
+                if (first_link) { /* shared_link: a later one draws the first one's weight (its counter) */\
                     int64_t *first = first_link + (recur_split && want_rec) * NN + s;             \
-                    if (*first >= 0) job_counter[n_jobs] = job_counter[*first]; else *first = n_jobs;\
+                    later = *first >= 0;                                                          \
+                    if (!later) *first = n_jobs;                                                  \
+                    else if (shared_link) job_counter[n_jobs] = job_counter[*first];              \
                 }                                                                                 \
-                job_slot[n_jobs] = (int32_t)s; job_kind[n_jobs++] = JOB_CONN;                     \
+                job_slot[n_jobs] = (int32_t)s; job_kind[n_jobs++] = later ? JOB_CONN_LATER : JOB_CONN;\
                 c[s] = 1; e[s] = 1; bits[s / 64] |= 1ULL << (s % 64);                            \
                 genes[n_genes++] = (int32_t)s;                                                    \
             }                                                                                     \
@@ -272,6 +326,7 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
         if (clone ? !conn_drawn : (!exclusive || (!node_drawn && !conn_drawn))) {                 \
         const int genome_hit = uniform01(key, b0 + blocks[B_W_GENOME] + p) < w_rate || clone;     \
         const uint64_t c_u = b0 + blocks[B_W_U] + p * NN, c_z = b0 + blocks[B_W_NOISE] + 2 * p * NN;\
+        if (w_mut) w_mut[crow] = neatc ? genome_hit : (per_gene || genome_hit);                   \
         if (neatc && genome_hit) { /* [NEATC] mutate_link_weights: genes in slot order */        \
             n_genes = bits_to_slots(bits, W, genes);                                              \
             const int severe = (active[row] & 2) != 0;                                            \
@@ -335,10 +390,11 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
         T *w = cw + job_row[q] * NN;                                                              \
         const int64_t s = job_slot[q];                                                            \
         const T zt = (T)job_z[q];                                                                 \
-        if (job_kind[q] == JOB_CONN) {                                                            \
+        if (job_kind[q] <= JOB_CONN_LATER) {                                                      \
             T init = zt * stdev; init = init + mean;                                              \
             if (w_uniform) init = (T)(u_lo + (u_hi - u_lo) * uniform01(key, job_counter[q]));     \
             w[s] = clampT_##SFX(init, lo, hi);                                                    \
+            if (cm) cm[job_row[q] * NN + s] = job_kind[q] == JOB_CONN ? w[s] : (T)0;              \
         } else if (job_kind[q] == JOB_SIGMA) {                                                    \
             T step = zt * (T)s_power;                                                             \
             cs[job_row[q]] = clampT_##SFX(cs[job_row[q]] + step, (T)s_min, (T)s_max);             \
@@ -352,7 +408,11 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
             w[s] = clampT_##SFX(job_kind[q] == JOB_REPLACE ? fresh : pert, lo, hi);               \
         }                                                                                         \
     }                                                                                             \
-    free(job_counter); free(first_link);                                                          \
+    /* [NEATC] mutate_link_weights: every gene's mutation_num is its weight (0 where no gene) */  \
+    if (w_mut)                                                                                    \
+        for (int64_t crow = 0; crow < row1 - row0; ++crow)                                        \
+            if (w_mut[crow]) memcpy(cm + crow * NN, cw + crow * NN, NN * sizeof(T));              \
+    free(job_counter); free(first_link); free(w_mut);                                             \
 }                                                                                                 \
 /* The closest living representative of run r within thr for genome rows row0 .. row0 + P of  \
    g (-1: none; first slot on ties): out[0 .. P). With ident (the species' numbers [R, S]):       \
@@ -452,7 +512,8 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
                  const T *r_sig, const uint8_t *r_alive, int64_t S, const double *coef, double thr,\
                  int64_t *nearest, int exclusive, int neatc, int recur_split, int one_on,         \
                  double one_prob, double re_prob, double clone_link_prob, int64_t conn_tries,     \
-                 const int64_t *r_ident, int w_uniform, int shared_link, int threads) {           \
+                 const int64_t *r_ident, int w_uniform, int shared_link, const T *pm, T *cm,     \
+                 int64_t split_first_bias, int threads) {                                         \
     const int64_t NN = N * N, words = (NN + 63) / 64;                                             \
     _Pragma("omp parallel for schedule(static) num_threads(threads)")                             \
     for (int64_t r = 0; r < R; ++r) {                                                             \
@@ -460,7 +521,8 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
         /* dest_runs: the children overwrite their parents' run dest_runs[r] of the parent arrays \
            (the same arrays as the child ones), so the run's parents are copied aside first. */ \
         const int64_t c0 = (dest_runs ? dest_runs[r] : r) * P;                                    \
-        T *cw_r = cw + c0 * NN, *cs_r = cs + c0;                                                  \
+        T *cw_r = cw + c0 * NN, *cs_r = cs + c0, *cm_r = cm ? cm + c0 * NN : NULL;                \
+        const T *pm_r = pm; T *m_aside = NULL;                                                    \
         uint8_t *cc_r = cc + c0 * NN, *ce_r = ce + c0 * NN, *cn_r = cn + c0 * N;                  \
         const T *pw_r = pw, *ps_r = ps; const uint8_t *pc_r = pc, *pe_r = pe, *pn_r = pn;          \
         int64_t idx0 = 0; char *aside = NULL; int64_t *loc = NULL;                                \
@@ -485,12 +547,18 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
                 memcpy(c + k * NN, pc + from * NN, NN); memcpy(e + k * NN, pe + from * NN, NN);   \
                 memcpy(nd + k * N, pn + from * N, N);                                             \
             }                                                                                     \
+            if (pm) { /* the parents' mutation_num aside too */                                   \
+                m_aside = malloc(n_used * NN * sizeof(T));                                        \
+                for (int64_t q = 0; q < P; ++q)                                                   \
+                    if (slot[q] >= 0) memcpy(m_aside + slot[q] * NN, pm + (c0 + q) * NN, NN * sizeof(T));\
+                pm_r = m_aside;                                                                   \
+            }                                                                                     \
             pw_r = w; ps_r = sg; pc_r = c; pe_r = e; pn_r = nd; ia = la; ib = lb; idx0 = row0;    \
         }                                                                                         \
         phase1_##SFX(pw_r, pc_r, pe_r, pn_r, ps_r, ia, ib, do_cross, active, cw_r, cc_r, ce_r, cn_r,\
                      cs_r, src, dst, request, keys, base, blocks, R, P, N, inherit_disabled, node_add_prob,\
-                     idx0, row0, row1, gbits);                                                    \
-        free(aside); free(loc);                                                                   \
+                     idx0, row0, row1, gbits, pm_r, cm_r, split_first_bias, first_output);        \
+        free(aside); free(loc); free(m_aside);                                                    \
         uint8_t used[MAX_ROWS]; int64_t free_slots[MAX_ROWS], n_free = 0;                         \
         for (int64_t j = 0; j < N; ++j) used[j] = reserved[r * N + j];                            \
         for (int64_t q = 0; q < P; ++q)                                                           \
@@ -513,9 +581,9 @@ void breed_##SFX(const T *pw, const uint8_t *pc, const uint8_t *pe, const uint8_
                      w_rate, w_rate_sum, w_replace, w_power, s_rate, s_power, s_min, s_max, toggle_rate,\
                      row0, row1, gbits, gbefore, gcount, gtop, exclusive, node_add_prob, neatc,   \
                      recur_split, one_on, one_prob, re_prob, first_hidden, clone_link_prob, conn_tries,\
-                     w_uniform, shared_link);                                                     \
+                     w_uniform, shared_link, cm_r);                                               \
         if (nearest) { /* speciate's first step, while the run's children are in cache */         \
-            const genes_##SFX cg = {gbits, gbefore, gcount, gtop, cw, cs, gmap};                  \
+            const genes_##SFX cg = {gbits, gbefore, gcount, gtop, cm ? cm : cw, cs, gmap}; /* the distance's weights */\
             const genes_##SFX rg = {r_bits, r_pre, r_cnt, r_top, r_w, r_sig, NULL};               \
             nearest_reps_##SFX(cg, row0, P, rg, r_alive, r, S, NN, words, coef, thr, nearest + row0, r_ident);\
         }                                                                                         \

@@ -8,7 +8,10 @@
 
 /* One breeding step, a run at a time: crossover, add-node with the run's node registry,
    add-connection, weight, sigma and enabled mutations; the children's gene bitsets; with the
-   representatives (r_*), each child's closest one (speciate's first step). */
+   representatives (r_*), each child's closest one (speciate's first step). pm, cm: the parents'
+   and children's mutation_num ([NEATC]), or NULL where not carried; with cm, the closest
+   representative goes by the children's mutation_num. split_first_bias: the first bias node for
+   [NEATC]'s choice of the gene to split (node_add_neatc), or -1 for any enabled gene. */
 void breed_f32(const float *pw, const uint8_t *pc, const uint8_t *pe, const uint8_t *pn, const float *ps,
                const int64_t *a_idx, const int64_t *b_idx, const uint8_t *do_cross, const uint8_t *active,
                float *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, float *cs, int64_t *src, int64_t *dst,
@@ -23,7 +26,8 @@ void breed_f32(const float *pw, const uint8_t *pc, const uint8_t *pe, const uint
                const float *r_w, const float *r_sig, const uint8_t *r_alive, int64_t S, const double *coef,
                double thr, int64_t *nearest, int exclusive, int neatc, int recur_split, int one_on,
                double one_prob, double re_prob, double clone_link_prob, int64_t conn_tries,
-               const int64_t *r_ident, int w_uniform, int shared_link, int threads);
+               const int64_t *r_ident, int w_uniform, int shared_link, const float *pm, float *cm,
+               int64_t split_first_bias, int threads);
 void breed_f64(const double *pw, const uint8_t *pc, const uint8_t *pe, const uint8_t *pn, const double *ps,
                const int64_t *a_idx, const int64_t *b_idx, const uint8_t *do_cross, const uint8_t *active,
                double *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, double *cs, int64_t *src, int64_t *dst,
@@ -38,7 +42,8 @@ void breed_f64(const double *pw, const uint8_t *pc, const uint8_t *pe, const uin
                const double *r_w, const double *r_sig, const uint8_t *r_alive, int64_t S, const double *coef,
                double thr, int64_t *nearest, int exclusive, int neatc, int recur_split, int one_on,
                double one_prob, double re_prob, double clone_link_prob, int64_t conn_tries,
-               const int64_t *r_ident, int w_uniform, int shared_link, int threads);
+               const int64_t *r_ident, int w_uniform, int shared_link, const double *pm, double *cm,
+               int64_t split_first_bias, int threads);
 /* speciate's assignment: the closest living representative within thr, else found a species. */
 void assign_species_f32(const uint64_t *g_bits, const int64_t *g_pre, const int64_t *g_cnt,
                         const int64_t *g_top, const float *g_w, const float *g_sig, const int64_t *g_map,
