@@ -395,7 +395,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "seeds; or one preset for both: neat-c++ (NEAT 2002 / NEAT C++), neat-python (its defaults), "
                           "neat-1.2.1-dpv or neat-1.2.1-dpnv (NEAT C++ 1.2.1's double-pole parameter files, their "
                           "populations included), neat-1.2.1-dpnv-per-gene (p2nv.ne with population 300 and "
-                          "per-gene weight steps: the DPNV pick)")
+                          "per-gene weight steps: the DPNV pick), neat-1.2.1-dpnv-snn (the same with population 100: "
+                          "NEAT-SNN's DPNV pick)")
     rep.add_argument("--coding", choices=CODINGS, default=CODINGS[0],
                      help="how observations reach the networks: 'study' (default: the paper's, or the double-pole "
                           "study's: [0, 1] over the bounds) or 'signed' (double pole: NEAT C++ 1.2.1's x/4.8, x_dot/2, "

@@ -37,6 +37,8 @@ class _GAPresets(Mapping):
     1000), loaded on first use: that module needs torch, and this one must not.
     "neat-1.2.1-dpnv-per-gene": ``p2nv.ne`` with population 300 and per-gene weight steps, the
     project's DPNV pick on tuning seeds (``evolution.neat121.NEAT121_DPNV_PER_GENE``).
+    "neat-1.2.1-dpnv-snn": the same with population 100, NEAT-SNN's DPNV pick on tuning seeds
+    (``evolution.neat121.NEAT121_DPNV_SNN``).
     """
 
     _OWN = {
@@ -47,7 +49,7 @@ class _GAPresets(Mapping):
             max_stagnation=20, compatibility_weight_coefficient=0.5, compatibility_normalize_min_genes=1),
     }
     _NEAT121 = {"neat-1.2.1-dpv": "NEAT121_DPV", "neat-1.2.1-dpnv": "NEAT121_DPNV",
-                "neat-1.2.1-dpnv-per-gene": "NEAT121_DPNV_PER_GENE"}
+                "neat-1.2.1-dpnv-per-gene": "NEAT121_DPNV_PER_GENE", "neat-1.2.1-dpnv-snn": "NEAT121_DPNV_SNN"}
 
     def __getitem__(self, name: str) -> Mapping:
         if name in self._OWN:

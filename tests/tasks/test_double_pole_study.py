@@ -396,6 +396,16 @@ def test_the_dpnv_per_gene_pick_is_the_neat121_file_with_its_weight_rule_and_pop
     assert cfg.weight_mutate_power == NEAT121_DPNV["weight_mutate_power"] and cfg.num_inputs == 3
 
 
+def test_the_dpnv_snn_pick_is_the_per_gene_pick_with_population_100():
+    from evolution.neat121 import NEAT121_DPNV_PER_GENE, NEAT121_DPNV_SNN
+    from tasks.studies.registry import GA_CHOICES
+
+    assert "neat-1.2.1-dpnv-snn" in GA_CHOICES
+    assert {k for k in NEAT121_DPNV_SNN if NEAT121_DPNV_SNN[k] != NEAT121_DPNV_PER_GENE.get(k)} == {"pop_size"}
+    cfg = study_config("dpnv", "snn", ga="neat-1.2.1-dpnv-snn", coding="push-pull")
+    assert cfg.pop_size == 100 and cfg.weight_mutate_per_gene and cfg.num_inputs == 6
+
+
 def test_the_neat121_ablation_runs_each_setting_and_compares_it_to_the_preset(capsys):
     import json
 
