@@ -530,7 +530,7 @@ def test_the_representatives_are_the_species_champions_of_the_evaluated_generati
     ("weight_mutate_neatc", "yes"), ("recur_only_prob", 2.0), ("toggle_enable_prob", -1.0),
     ("gene_reenable_prob", float("nan")), ("conn_add_recurrence", None), ("conn_add_tries", -1),
     ("conn_add_tries", 2.5), ("speciate_neatc", 1), ("weight_init_uniform", 1), ("conn_add_shared_weight", "yes"), ("survival_neatc", 0),
-    ("stagnation_clock_before", 1), ("compat_mutation_num", "on"),
+    ("stagnation_clock_before", 1), ("compat_mutation_num", "on"), ("node_add_neatc", 0),
 ])
 def test_bad_values_name_their_field(field, value):
     with pytest.raises(ConfigError, match=field):

@@ -390,7 +390,7 @@ def test_the_dpnv_per_gene_pick_is_the_neat121_file_with_its_weight_rule_and_pop
     assert changed | (NEAT121_DPNV_PER_GENE.keys() - NEAT121_DPNV.keys()) == {
         "pop_size", "weight_mutate_neatc", "weight_mutate_per_gene", "weight_mutate_rate", "weight_replace_rate",
         "conn_add_tries", "weight_init_uniform", "weight_init_stdev", "conn_add_shared_weight", "survival_neatc",
-        "stagnation_clock_before", "compat_mutation_num"}
+        "stagnation_clock_before", "compat_mutation_num", "node_add_neatc"}
     cfg = STUDIES["dpnv"].config("sigmoid", ga="neat-1.2.1-dpnv-per-gene", coding="signed")
     assert cfg.pop_size == 300 and cfg.weight_mutate_per_gene and not cfg.weight_mutate_neatc
     assert cfg.weight_mutate_power == NEAT121_DPNV["weight_mutate_power"] and cfg.num_inputs == 3
