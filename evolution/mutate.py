@@ -189,6 +189,20 @@ def _pick_for(mask: Tensor, u: Tensor) -> tuple[Tensor, Tensor, Tensor]:
     return slot // N, slot % N, n > 0
 
 
+def _tries_law(u: Tensor, good: Tensor, total: Tensor, tries: int) -> tuple[Tensor, Tensor]:
+    """[NEATC]'s random tries from one float64 uniform ``u[K]`` each: of ``tries`` draws, each good
+    with ``good / total``, the first good one is the ``k``-th of the ``good`` (exactly uniformly),
+    or none is: ``u`` below ``(1 - good / total)^tries``. Returns ``(k, possible)``; the fail
+    chance is a product, as the kernel forms it (``breed.c``'s ``tries_law``, bit for bit)."""
+    miss = 1.0 - good.double() / total.clamp_min(1).double()
+    fail = torch.ones_like(u)
+    for _ in range(tries):
+        fail = fail * miss
+    possible = (good > 0) & ~(u < fail)
+    share = torch.where(possible, (u - fail) / torch.where(possible, 1.0 - fail, 1.0), 0.0)
+    return (share * good.double()).long().clamp_max(good - 1).clamp_min(0), possible
+
+
 def _pick_by_tries(mask: Tensor, node: Tensor, u: Tensor, loops: Tensor, tries: int, first_output: int
                    ) -> tuple[Tensor, Tensor, Tensor]:
     """[NEATC]'s ``mutate_add_link`` draw for a subset of genomes, from one uniform ``u[K]``: each of
@@ -205,14 +219,7 @@ def _pick_by_tries(mask: Tensor, node: Tensor, u: Tensor, loops: Tensor, tries: 
     flat = (mask.long() * (1 + loop_share)).flatten(1)
     total = flat.sum(1)
     pairs = nodes * targets * torch.where(loops, 2, 1)
-    one_try = total.double() / pairs.clamp_min(1).double()
-    miss = 1.0 - one_try
-    fail = torch.ones_like(u)
-    for _ in range(tries):
-        fail = fail * miss
-    possible = (total > 0) & ~(u < fail)
-    share = torch.where(possible, (u - fail) / torch.where(possible, 1.0 - fail, 1.0), 0.0)
-    target = (share * total.double()).long().clamp_max(total - 1).clamp_min(0)
+    target, possible = _tries_law(u, total, pairs, tries)
     slot = torch.searchsorted(flat.cumsum(1), (target + 1).unsqueeze(1)).squeeze(1).clamp_max(N * N - 1)
     return slot // N, slot % N, possible
 
@@ -318,14 +325,7 @@ def _pick_split_neatc(conn: Tensor, enabled: Tensor, u: Tensor, first_bias: int,
     walk_ok = (m > 0) & (target < non_bias.sum(1))
     walk_slot = walk_slot.clamp_max(N * N - 1)
     walk_ok = walk_ok & torch.gather(valid, 1, walk_slot.unsqueeze(1)).squeeze(1)
-    # the tries: one uniform for the exact distribution of the first valid draw of 20
-    miss = 1.0 - m.double() / n.clamp_min(1).double()
-    fail = torch.ones_like(u)
-    for _ in range(SPLIT_TRIES):  # a product, as the kernel forms it (bit for bit)
-        fail = fail * miss
-    tries_ok = (m > 0) & ~(u < fail)
-    share = torch.where(tries_ok, (u - fail) / torch.where(tries_ok, 1.0 - fail, 1.0), 0.0)
-    pick = (share * m.double()).long().clamp_max(m - 1).clamp_min(0)
+    pick, tries_ok = _tries_law(u, m, n, SPLIT_TRIES)
     tries_slot = torch.searchsorted(valid.long().cumsum(1), (pick + 1).unsqueeze(1)).squeeze(1).clamp_max(N * N - 1)
     walk = n < SPLIT_WALK_GENES
     slot = torch.where(walk, walk_slot, tries_slot)

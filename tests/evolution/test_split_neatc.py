@@ -98,6 +98,28 @@ def test_the_option_changes_which_genes_split():
     assert int(split_from[True][0]) > 2 * int(split_from[True][1])  # the walk favours the first gene
 
 
+def _bred_alike_on_both_paths(g, cfg, seeds: list[int], *, one_species: bool):
+    """One generation bred from ``g`` (two runs) on the tensor and the C path; asserts they are equal and
+    returns the children and the refused splits. ``one_species``: every genome in species 0, else speciated."""
+    out = []
+    for fused in (False, True):
+        rng = RunRNG(seeds)
+        sp = empty_species(2, cfg.num_nodes, 2, device=g.device, dtype=g.weight.dtype)
+        if one_species:
+            species = torch.zeros(2, cfg.pop_size, dtype=torch.long)
+            sp.alive[:, 0] = True
+        else:
+            species, sp = speciate(g, sp, cfg, rng, 0, fused=fused)
+        fitness = rng.rand(cfg.pop_size, dtype=torch.float64)
+        children, _, _, info = reproduce(g, fitness, species, sp, cfg, rng, 0, fused=fused)
+        out.append((children, info.split_refused))
+    (a, ra), (b, rb) = out
+    for name, t in a.tensors().items():
+        assert torch.equal(t, getattr(b, name)), name
+    assert torch.equal(ra, rb)
+    return a, ra
+
+
 @needs_kernel
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_the_c_breeding_path_splits_as_the_tensor_path_in_small_and_large_genomes(seed):
@@ -107,18 +129,7 @@ def test_the_c_breeding_path_splits_as_the_tensor_path_in_small_and_large_genome
     g = random_genomes(cfg, runs=2, hidden=3, density=0.5, seed=seed)
     genes = g.num_genes()
     assert bool((genes >= 15).any()) and bool((genes < 15).any())
-    out = []
-    for fused in (False, True):
-        rng = RunRNG([seed, seed + 7])
-        sp = empty_species(2, cfg.num_nodes, 2, device=g.device, dtype=g.weight.dtype)
-        species, sp = speciate(g, sp, cfg, rng, 0, fused=fused)
-        fitness = rng.rand(cfg.pop_size, dtype=torch.float64)
-        children, _, _, info = reproduce(g, fitness, species, sp, cfg, rng, 0, fused=fused)
-        out.append((children, info.split_refused))
-    (a, ra), (b, rb) = out
-    for name, t in a.tensors().items():
-        assert torch.equal(t, getattr(b, name)), name
-    assert torch.equal(ra, rb)
+    a, ra = _bred_alike_on_both_paths(g, cfg, [seed, seed + 7], one_species=False)
     assert bool((a.node[..., cfg.first_hidden:].sum(-1) > g.node[..., cfg.first_hidden:].sum(-1).max()).any() |
                 (ra > 0).any())  # splits happened (or were refused for want of a slot)
 
@@ -133,18 +144,6 @@ def test_the_c_breeding_path_draws_the_20_tries_as_the_tensor_path():
     keep = torch.rand(g.enabled.shape, generator=torch.Generator().manual_seed(9)) < 0.12
     g = dataclasses.replace(g, enabled=g.conn & keep)
     assert bool((g.num_genes() >= 15).all())
-    out = []
-    for fused in (False, True):
-        rng = RunRNG([11, 12])
-        species = torch.zeros(2, cfg.pop_size, dtype=torch.long)
-        sp = empty_species(2, cfg.num_nodes, 2, device=g.device, dtype=g.weight.dtype)
-        sp.alive[:, 0] = True
-        fitness = rng.rand(cfg.pop_size, dtype=torch.float64)
-        children, _, _, info = reproduce(g, fitness, species, sp, cfg, rng, 0, fused=fused)
-        out.append((children, info.split_refused))
-    (a, ra), (b, rb) = out
-    for name, t in a.tensors().items():
-        assert torch.equal(t, getattr(b, name)), name
-    assert torch.equal(ra, rb)
+    a, ra = _bred_alike_on_both_paths(g, cfg, [11, 12], one_species=True)
     splits = int((a.node.sum(-1) > 4 + cfg.first_hidden).sum() + ra.sum())
     assert 0.2 * 2 * cfg.pop_size < splits < 0.9 * 2 * cfg.pop_size  # some children split, others drew 20 failing tries

@@ -66,6 +66,17 @@ static inline int64_t pick_k(double u, int64_t n) {
     return k > n - 1 ? n - 1 : (k < 0 ? 0 : k);
 }
 
+/* [NEATC]'s random tries, from one uniform u: the first of `tries` draws, each good with
+   good / all, is the k-th good one (returned) or none of them is (-1). mutate.py's _tries_law, op by op. */
+static int64_t tries_law(double u, int64_t good, int64_t all, int64_t tries) {
+    const double miss = 1.0 - (double)good / (double)(all > 1 ? all : 1);
+    double fail = 1.0;
+    for (int64_t t = 0; t < tries; ++t) fail = fail * miss;
+    if (good <= 0 || u < fail) return -1;
+    const int64_t k = (int64_t)((u - fail) / (1.0 - fail) * (double)good);
+    return k > good - 1 ? good - 1 : (k < 0 ? 0 : k);
+}
+
 /* [NEATC] Genome::mutate_add_node's gene to split, -1 for none: mutate.py's _pick_split_neatc, op by
    op. Never a gene from a bias node (rows [first_bias, first_output)); under 15 genes a walk in slot
    order from the first enabled one, on with 0.3 per step; else 20 random tries (the exact law of the
@@ -90,12 +101,8 @@ static int64_t split_neatc(const uint8_t *c, const uint8_t *e, int64_t N, double
         }
         return -1;
     }
-    const double miss = 1.0 - (double)m / (double)n;
-    double fail = 1.0;
-    for (int t = 0; t < 20; ++t) fail = fail * miss;
-    if (u < fail) return -1;
-    int64_t k = (int64_t)((u - fail) / (1.0 - fail) * (double)m);
-    k = k > m - 1 ? m - 1 : (k < 0 ? 0 : k);
+    int64_t k = tries_law(u, m, n, 20);
+    if (k < 0) return -1;
     for (int64_t s = 0; s < NN; ++s)
         if (c[s] && e[s] && !(s / N >= first_bias && s / N < first_output) && k-- == 0) return s;
     return -1;
@@ -289,13 +296,8 @@ static inline void phase2_##SFX(T *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, T 
                 for (int64_t i = 0; i < N; ++i)                                                   \
                     total += __builtin_popcountll(cand[i]) + (loops ? (int64_t)(cand[i] >> i & 1) * nn : 0);\
                 const int64_t pairs = nn * nt * (loops ? 2 : 1);                                  \
-                const double miss = 1.0 - (double)total / (double)(pairs > 1 ? pairs : 1);        \
-                double fail = 1.0;                                                                \
-                for (int64_t t = 0; t < conn_tries; ++t) fail = fail * miss;                      \
-                const double u = uniform01(key, b0 + blocks[B_CONN_PICK] + p);                    \
-                if (!(u < fail)) {                                                                \
-                    int64_t k = (int64_t)((u - fail) / (1.0 - fail) * (double)total);             \
-                    k = k > total - 1 ? total - 1 : (k < 0 ? 0 : k);                              \
+                int64_t k = tries_law(uniform01(key, b0 + blocks[B_CONN_PICK] + p), total, pairs, conn_tries);\
+                if (k >= 0) {                                                                     \
                     for (int64_t i = 0; i < N && s < 0; ++i)                                      \
                         for (uint64_t m = cand[i]; m; m &= m - 1) {                               \
                             const int64_t j = __builtin_ctzll(m);                                 \
