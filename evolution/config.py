@@ -44,6 +44,11 @@ class NEATConfig:
     # [NEAT02] uses a bias input with constant activation 1; spiking controllers in
     # [Qiu19] have none (their neurons get a background current instead).
     num_bias: int = field(default=1, metadata=_range(0, None, integer=True))
+    # The bias nodes' value: 1 [NEAT02]; NEAT C++ 1.2.1's pole balancing feeds 0.5 ([NEATC]
+    # ``cartpole`` experiments: ``input[...] = .5``). A sigmoid network holds its bias nodes at 1
+    # and scales their outgoing weights by it (the same sums); a spiking one injects this many
+    # times its full input current.
+    bias_value: float = field(default=1.0, metadata=_range(None, None))
     # Hidden-node slots per genome index. Fixed, so a run's numbers never depend on the
     # other runs in its batch; slots no genome of a run uses any more are reclaimed, so a
     # run never dies of a full index (an add-node that finds no free slot is skipped and
@@ -188,10 +193,9 @@ class NEATConfig:
     # species' champion of the parents' generation. Off: the closest representative, a random
     # member ([NP], [NEAT02]).
     speciate_neatc: bool = False
-    # [NEATC] ``Genome::mutate_add_node``'s choice of the gene to split: never one leaving a bias
-    # node; in a genome of fewer than 15 genes a walk in gene (slot) order from the first enabled
-    # one, on to the next with 0.3 each step, splitting nothing if it ends on a disabled gene; else 20
-    # random tries. Off: any enabled gene, uniformly ([NEAT02]).
+    # [NEATC] ``Genome::mutate_add_node``'s choice of the gene to split: 20 random tries of a gene,
+    # the first enabled one not leaving a bias node taken (none if all 20 miss). Off: any enabled
+    # gene, uniformly ([NEAT02]).
     node_add_neatc: bool = False
     # [NEATC] ``Gene::mutation_num``: the compatibility distance's weight term reads each gene's
     # weight as of its genome's last weight mutation (``Genomes.mutation_num``), not its weight:

@@ -287,49 +287,27 @@ def _first_of_each_link(run: Tensor, recurrent: Tensor, src: Tensor, dst: Tensor
     return first.scatter_reduce(0, group, position, reduce="amin")[group]
 
 
-# [NEATC] Genome::mutate_add_node: a genome of fewer genes walks them in order, else draws 20 at random
-SPLIT_WALK_GENES = 15
-SPLIT_WALK_STEP = 0.3  # the walk's chance to go on to the next gene
+# [NEATC] Genome::mutate_add_node draws 20 random genes (its walk over a small genome's genes, from
+# the oldest, sits under ``if (false)`` in NEAT 1.2.1: dead code)
 SPLIT_TRIES = 20
-_WALK_POWERS = [SPLIT_WALK_STEP]  # 0.3^j, j = 1..64, by repeated products (the kernel's doubles)
-for _ in range(63):
-    _WALK_POWERS.append(_WALK_POWERS[-1] * SPLIT_WALK_STEP)
 
 
 def _pick_split_neatc(conn: Tensor, enabled: Tensor, u: Tensor, first_bias: int, first_output: int
                       ) -> tuple[Tensor, Tensor, Tensor]:
     """[NEATC]'s choice of the gene to split, for a subset of genomes ``conn/enabled[K, N, N]``, from
-    one uniform ``u[K]``. A gene leaving a bias node (slots ``[first_bias, first_output)``) is never
-    split. With fewer than ``SPLIT_WALK_GENES`` genes, the walk starts at the first enabled gene not
-    from a bias node (slot order standing for gene order) and goes on to the next gene with
-    ``SPLIT_WALK_STEP`` each step, passing over bias genes: it ends on the k-th non-bias gene from
-    its start with probability ``0.3^k 0.7`` (k: how many of 0.3^1, 0.3^2, ... exceed u), and splits nothing if that
-    gene is disabled or there is none. Otherwise ``SPLIT_TRIES`` random genes are tried, the first
-    enabled non-bias one taken: none with probability ``(1 - m / n)^20`` (u below it; m such genes
-    of n), else the ``floor((u - fail) / (1 - fail) m)``-th of them. The breeding kernel repeats
-    these operations (``breed.c``). Returns ``(i, j, possible)``."""
+    one uniform ``u[K]``: ``SPLIT_TRIES`` random genes are tried and the first enabled one not
+    leaving a bias node (slots ``[first_bias, first_output)``) is taken: none with probability
+    ``(1 - m / n)^20`` (u below it; m such genes of n), else the ``floor((u - fail) / (1 - fail) m)``-th
+    of them in slot order. The breeding kernel repeats these operations (``breed.c``). Returns
+    ``(i, j, possible)``."""
     N = conn.shape[-1]
     src_node = torch.arange(N, device=conn.device).view(1, N, 1)
-    non_bias = (conn & ~((src_node >= first_bias) & (src_node < first_output))).flatten(1)
-    valid = non_bias & enabled.flatten(1)
+    valid = (conn & enabled & ~((src_node >= first_bias) & (src_node < first_output))).flatten(1)
     n = conn.flatten(1).sum(1)
     m = valid.sum(1)
-    slot_idx = torch.arange(N * N, device=conn.device)
-    # the walk: from the first valid gene, k further non-bias genes
-    start = torch.where(valid, slot_idx, N * N).amin(1)
-    k = (u.unsqueeze(1) < torch.tensor(_WALK_POWERS, dtype=torch.float64, device=u.device)).sum(1)  # u < 0.3^j
-    rank = non_bias.long().cumsum(1) - 1  # each non-bias gene's rank among them
-    start_rank = torch.gather(rank, 1, start.clamp_max(N * N - 1).unsqueeze(1)).squeeze(1)
-    target = start_rank + k
-    walk_slot = torch.searchsorted(rank.contiguous(), target.unsqueeze(1)).squeeze(1)  # first slot of that rank
-    walk_ok = (m > 0) & (target < non_bias.sum(1))
-    walk_slot = walk_slot.clamp_max(N * N - 1)
-    walk_ok = walk_ok & torch.gather(valid, 1, walk_slot.unsqueeze(1)).squeeze(1)
-    pick, tries_ok = _tries_law(u, m, n, SPLIT_TRIES)
-    tries_slot = torch.searchsorted(valid.long().cumsum(1), (pick + 1).unsqueeze(1)).squeeze(1).clamp_max(N * N - 1)
-    walk = n < SPLIT_WALK_GENES
-    slot = torch.where(walk, walk_slot, tries_slot)
-    return slot // N, slot % N, torch.where(walk, walk_ok, tries_ok)
+    pick, ok = _tries_law(u, m, n, SPLIT_TRIES)
+    slot = torch.searchsorted(valid.long().cumsum(1), (pick + 1).unsqueeze(1)).squeeze(1).clamp_max(N * N - 1)
+    return slot // N, slot % N, ok
 
 
 def mutate_add_node(g: Genomes, cfg: NEATConfig, rng: RunRNG, active: Tensor,

@@ -6,8 +6,7 @@ layout (``num_inputs``, ``num_outputs``, ``num_bias``): the caller does, as for 
 
 Where the presets only approximate NEAT 1.2.1 (``NEATConfig`` has no option for it):
 - slot order stands for gene (innovation) order: the tail of ``mutate_link_weights``, the gene
-  ``mutate_toggle_enable`` picks, the first disabled gene ``mutate_gene_reenable`` enables and the
-  walk of ``mutate_add_node`` over a small genome's genes.
+  ``mutate_toggle_enable`` picks and the first disabled gene ``mutate_gene_reenable`` enables.
 - delta coding when a run has a single species: NEAT 1.2.1 gives it ``pop - pop // 2``
   offspring (the population shrinks), ours all of them.
 - the interspecies mate a species champion (ours any species' parent).
@@ -32,6 +31,7 @@ __all__ = ["NEAT121_DPV", "NEAT121_DPNV", "NEAT121_DPNV_PER_GENE", "NEAT121_DPNV
 
 NEAT121_DPV: dict = {
     "pop_size": 150,  # PopulationSize
+    "bias_value": 0.5,  # the cartpole experiments' bias input, input[...] = .5 (since 2026-12-06; before, 1)
     "weight_mutate_power": 2.5,  # weight_mut_power
     "compatibility_disjoint_coefficient": 1.0,  # disjoint_coeff
     "compatibility_excess_coefficient": 1.0,  # excess_coeff
@@ -65,7 +65,7 @@ NEAT121_DPV: dict = {
     # seeds 700-799, it gave 90/100 in 46,185 evaluations, further from NEAT C++'s 30,770 than the
     # closest rule's 35,259 (docs/beyond-the-paper.md)
     "node_add_prob": 0.03,  # mutate_add_node_prob
-    # mutate_add_node's choice: no bias gene, a walk from the oldest gene under 15 genes (since 2026-12-06)
+    # mutate_add_node's choice: no bias gene, 20 random tries (since 2026-12-06)
     "node_add_neatc": True,
     "conn_add_prob": 0.05,  # mutate_add_link_prob
     "mutation_exclusive": True,  # Species::reproduce: add node, else add link, else the rest
@@ -121,6 +121,7 @@ NEAT121_DPNV_PER_GENE: dict = {
     "stagnation_clock_before": False,  # the clock restarted before the penalty, as when it was picked
     "compat_mutation_num": False,  # the distance reads the weights, as when it was picked
     "node_add_neatc": False,  # any enabled gene split, as when it was picked
+    "bias_value": 1.0,  # the bias input at 1, as when it was picked
 }
 
 # Ours: the per-gene pick with population 100, NEAT-SNN's DPNV pick. Picked on tuning seeds

@@ -437,7 +437,7 @@ class SpikingController(_Phenotype):
         self.decoder: nn.Module = SPIKING_DECODERS[spec.decoder](self.action_max, spec)
         # input and bias currents of each control step: [n] buffer, bias slots at i_input_max
         self._bias = torch.zeros(n, dtype=self.weight.dtype, device=self.weight.device)
-        self._bias[self.n_in : self.n_in + self.n_bias] = spec.i_input_max
+        self._bias[self.n_in : self.n_in + self.n_bias] = spec.i_input_max * config.bias_value
         self._kernel: _BoundKernel | None = None  # the C kernel's constants, bound at its first step
 
     @classmethod
@@ -584,6 +584,9 @@ class SigmoidController(_Phenotype):
         spec = SigmoidSpec() if spec is None else spec
         super().__init__(genomes, config, observation_size, action_size, spec.input_coding)
         self.spec = spec
+        if config.bias_value != 1.0:  # the bias nodes stay at 1; their weights carry the value (same products)
+            self.weight = self.weight.clone()
+            self.weight[:, self.n_in:self.n_in + self.n_bias] *= config.bias_value
         self.network = PopulationRecurrentSigmoid(self.weight, self.mask, num_clamped=self.n_in, num_bias=self.n_bias,
                                                   slope=spec.slope, backend="auto" if backend == "compiled" else backend)
         self.action_max = float(action_max)

@@ -51,7 +51,7 @@ def main() -> None:
                         "(the mean damping fitness over them)")
     p.add_argument("--test", default="champion", choices=("champion", "species"),
                    help="DPNV's test of a generation: the overall champion (NEAT 2002 as read here) or NEAT C++ "
-                        "1.2.1's champion of the best species not tested since it improved")
+                        "1.2.1's champion of the best species not tested since its last record")
     a = p.parse_args()
     torch.set_num_threads(1)
     velocities = a.task == "dpv"

@@ -406,7 +406,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "part; NEAT-SNN at 300 nA per unit: the coding with which it solves DPNV)")
     rep.add_argument("--champion-test", choices=CHAMPION_TESTS, default=None,
                      help="dpnv only: the test of a generation: NEAT C++ 1.2.1's champion of the best species not "
-                          "tested since it last improved ('species', the default), or each run's overall champion, "
+                          "tested since its last record (the best when all were; 'species', the default), or each run's overall champion, "
                           "every generation ('champion', the default before 2026-12-03)")
     rep.add_argument("--fitness-starts", type=_positive_int, default=1, metavar="K",
                      help="dpnv only: the damping fitness averaged over K episodes, from the standard start and K-1 "

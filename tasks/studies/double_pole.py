@@ -247,55 +247,73 @@ def champions_test(champions, config, spec=None, *, velocities: bool = False,
 
 
 class SpeciesChampionTest:
-    """NEAT C++ 1.2.1's DPNV test of a generation, as a ``solved_fn(genomes, fitness) -> [R, P]`` of one
-    ``NEAT``: in each unsolved run, the champion of the best species (by its best fitness this
-    generation) that has not been tested since it last improved is tested (``champions_pass``);
-    one test per run and generation at most. A species counts as improved when its best fitness
-    this generation exceeds the one it had when it was last tested. The test of the overall
-    champion (``champion_solves``) instead retests the same genome while it stays the best.
+    """NEAT C++ 1.2.1's DPNV test of a generation (``pole2_epoch``), as a ``solved_fn(genomes, fitness)
+    -> [R, P]`` of one ``NEAT``: in each unsolved run, one champion per generation is tested
+    (``champions_pass``), the champion of the best species (by its best fitness this generation)
+    that is not checked, or of the best species when every one is. Testing a species checks it; a
+    species is unchecked again when its best fitness sets a record, above every earlier
+    generation's best of it (``Species::max_fitness_ever``); a new species starts unchecked. The
+    test of the overall champion (``champion_solves``) instead retests the same genome while it
+    stays the best.
 
-    The record of tested species is state: ``state_dict()`` / ``load_state_dict()`` carry it
+    The species' checks and records are state: ``state_dict()`` / ``load_state_dict()`` carry them
     through a checkpoint, so a resumed run tests what it would have.
     """
 
     def __init__(self, neat, test: Callable[[Genomes], Tensor]) -> None:
         self.neat, self.test = neat, test
-        self.tested: list[dict[int, float]] = [{} for _ in range(neat.num_runs)]
+        self.checked: list[dict[int, bool]] = [{} for _ in range(neat.num_runs)]
+        self.record: list[dict[int, float]] = [{} for _ in range(neat.num_runs)]
+
+    def _pick(self, r: int, slot: Tensor, f: Tensor) -> int:
+        """Run ``r``'s genome to test this generation (its position), updating its species' checks
+        and records; ``slot[P]`` the genomes' species slots, ``f[P]`` their fitness (float64)."""
+        S = int(self.neat.species_state.ident.shape[1])
+        best = torch.full((S,), -math.inf, dtype=torch.float64).scatter_reduce(0, slot, f, "amax")
+        ident = self.neat.species_state.ident[r].cpu().tolist()
+        present = sorted(set(slot.tolist()), key=lambda s: (-float(best[s]), s))  # the best species first
+        checked, record = self.checked[r], self.record[r]
+        for s in present:  # a record unchecks (a new species has none)
+            if float(best[s]) > record.get(ident[s], -math.inf):
+                checked[ident[s]] = False
+        chosen = next((s for s in present if not checked.get(ident[s], False)), present[0])
+        checked[ident[chosen]] = True
+        for s in present:  # Species::adjust_fitness, after the test: max_fitness_ever
+            record[ident[s]] = max(record.get(ident[s], -math.inf), float(best[s]))
+        alive = {ident[s] for s in present}  # a species without members is gone for good
+        self.checked[r] = {k: v for k, v in checked.items() if k in alive}
+        self.record[r] = {k: v for k, v in record.items() if k in alive}
+        return int(torch.nonzero((slot == chosen) & (f == best[chosen])).flatten()[0])
 
     def __call__(self, genomes: Genomes, fitness: Tensor) -> Tensor:
         neat = self.neat
         runs = torch.nonzero(neat.active_runs).flatten().tolist()  # the rows NEAT.solved_active passes
         if len(runs) != genomes.num_runs:
             raise ValueError(f"SpeciesChampionTest got {genomes.num_runs} runs, its NEAT has {len(runs)} unsolved")
-        picks = torch.zeros(len(runs), 1, dtype=torch.long)
-        chosen = torch.zeros(len(runs), dtype=torch.bool)
-        for row, r in enumerate(runs):
-            slot, f = neat.species[r].cpu(), fitness[row].detach().cpu().to(torch.float64)
-            S = int(neat.species_state.ident.shape[1])
-            best = torch.full((S,), -math.inf, dtype=torch.float64).scatter_reduce(0, slot, f, "amax")
-            ident = neat.species_state.ident[r].cpu().tolist()
-            order = sorted((s for s in set(slot.tolist())), key=lambda s: (-float(best[s]), s))
-            for s in order:  # the best species first; the first one not tested since it improved
-                seen = self.tested[r].get(ident[s])
-                if seen is None or float(best[s]) > seen:
-                    members = torch.nonzero((slot == s) & (f == best[s])).flatten()
-                    picks[row, 0], chosen[row] = int(members[0]), True
-                    self.tested[r][ident[s]] = float(best[s])
-                    break
+        picks = torch.tensor([[self._pick(r, neat.species[r].cpu(), fitness[row].detach().cpu().to(torch.float64))]
+                              for row, r in enumerate(runs)], dtype=torch.long).view(len(runs), 1)
         out = torch.zeros(fitness.shape, dtype=torch.bool, device=fitness.device)
-        if bool(chosen.any()):
-            passed = self.test(genomes.gather(picks.to(genomes.device))).cpu() & chosen
+        if len(runs):
+            passed = self.test(genomes.gather(picks.to(genomes.device))).cpu()
             out = out.scatter(1, picks.to(out.device), passed.to(out.device).unsqueeze(1))
         return out
 
     def state_dict(self) -> dict:
-        return {"tested": [{int(k): float(v) for k, v in d.items()} for d in self.tested]}
+        return {"checked": [{int(k): bool(v) for k, v in d.items()} for d in self.checked],
+                "record": [{int(k): float(v) for k, v in d.items()} for d in self.record]}
 
     def load_state_dict(self, state: dict) -> None:
-        tested = state.get("tested") if isinstance(state, dict) else None
-        if not isinstance(tested, list) or len(tested) != self.neat.num_runs:
-            raise ValueError(f"SpeciesChampionTest state must list {self.neat.num_runs} runs' tested species")
-        self.tested = [{int(k): float(v) for k, v in d.items()} for d in tested]
+        R = self.neat.num_runs
+        if isinstance(state, dict) and "tested" in state and "checked" not in state:
+            raise ValueError("SpeciesChampionTest state is from the rule before 2026-12-06 (species 'tested' at a "
+                             "fitness, not NEAT 1.2.1's checks and records): that run cannot resume bit for bit; "
+                             "start it again")
+        checked = state.get("checked") if isinstance(state, dict) else None
+        record = state.get("record") if isinstance(state, dict) else None
+        if not (isinstance(checked, list) and isinstance(record, list) and len(checked) == len(record) == R):
+            raise ValueError(f"SpeciesChampionTest state must list {R} runs' checked species and records")
+        self.checked = [{int(k): bool(v) for k, v in d.items()} for d in checked]
+        self.record = [{int(k): float(v) for k, v in d.items()} for d in record]
 
 
 def species_champion_test(variant: str, controller: str, config: NEATConfig, neat,

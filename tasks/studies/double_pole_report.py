@@ -157,8 +157,8 @@ def format_study_markdown(summary: dict, command: str) -> str:
                      f"{_fmt(p.get('neat121_median'))} |")
     budget = next(iter(summary["rows"].values()))["generations"]
     if any(row.get("champion_test") == "species" for row in summary["rows"].values()):
-        lines += ["", "Test of a generation: NEAT C++ 1.2.1's, the champion of the best species not tested since it "
-                  "last improved, one per run and generation (`--champion-test species`)."]
+        lines += ["", "Test of a generation: NEAT C++ 1.2.1's, the champion of the best species not tested since its "
+                  "last record (the best species when all were), one per run and generation (`--champion-test species`)."]
     for k in sorted({row["fitness_starts"] for row in summary["rows"].values() if "fitness_starts" in row}):
         lines += ["", f"Fitness: the mean damping fitness over {k} episodes, from the standard start and {k - 1} fixed "
                   f"random starts within Gruau's ranges (`--fitness-starts {k}`); one evaluation is one genome of "

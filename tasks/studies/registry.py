@@ -240,7 +240,7 @@ STUDIES: Mapping[str, Study] = MappingProxyType({s.name: s for s in (
           {"sigmoid": _NEAT_PYTHON_01, "snn": _NEAT_PYTHON_01}, _DOUBLE_POLE_REPORT,
           codings=_DOUBLE_POLE_CODINGS),
     # DPNV's test of a generation: NEAT C++ 1.2.1's ("species": the champion of the best species not
-    # tested since it improved), or each generation's overall champion ("champion", the default
+    # tested since its last record, the best when all were), or each generation's overall champion ("champion", the default
     # before 2026-12-03, which retests the same genome while it stays the best); its damping fitness
     # can be the mean over several starts (--fitness-starts, docs/beyond-the-paper.md) and see the short
     # pole (--fitness damping-both-poles)

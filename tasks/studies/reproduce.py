@@ -113,8 +113,8 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
     ``tasks.studies.registry.GA_PRESETS``, or ``"tuned"`` (default), the controller's own
     pick for the study. ``coding``: the study's input coding (``"study"``, or ``"signed"``).
     ``champion_test``: the test of a generation the study offers (default: its first; DPNV:
-    ``"species"``, NEAT C++ 1.2.1's champion of the best species not tested since it improved,
-    its record kept in the checkpoint, or ``"champion"``, each run's overall champion every
+    ``"species"``, NEAT C++ 1.2.1's champion of the best species not tested since its last record
+    (the best species when all were), its checks and records kept in the checkpoint, or ``"champion"``, each run's overall champion every
     generation).
     ``fitness_starts``: episodes per evaluation where the study offers it (DPNV: the mean damping
     fitness from the standard start and ``fitness_starts - 1`` fixed random starts,

@@ -1,6 +1,7 @@
 """Input codings (unit, signed, push-pull) for both controllers: the values, the layouts, and the
 same bits from the Python loop and the C episode loop."""
 
+import dataclasses
 import math
 
 import pytest
@@ -112,3 +113,26 @@ def test_rest_relative_inputs_rest_at_the_middle_of_the_range():
         else:
             assert torch.equal(rest_in, rest_hidden.expand(inputs))
         assert math.isfinite(float(controller.rest.sum()))
+
+
+def test_a_bias_value_of_one_half_acts_as_halved_bias_weights():
+    """``NEATConfig.bias_value`` (NEAT C++ 1.2.1 feeds 0.5): a sigmoid network acts as with bias value 1
+    and the bias node's outgoing weights halved, not as with the genomes' own weights; a spiking
+    network's bias current scales with it."""
+    task = PendulumTask(max_steps=8)
+    spec = SigmoidSpec(input_coding="signed")
+    cfg = task_config(task, spec, pop_size=6)
+    half = dataclasses.replace(cfg, bias_value=0.5)
+    genomes = _genomes(cfg, torch.float64)
+    halved_weight = genomes.weight.clone()
+    halved_weight[..., cfg.num_inputs, :] *= 0.5
+    halved = type(genomes)(**{**genomes.tensors(), "weight": halved_weight})
+    actions = [rollout(task, make_controller(g, c, task, spec), seed=3, record=True).trace["action"]
+               for g, c in ((genomes, half), (halved, cfg), (genomes, cfg))]
+    assert torch.equal(actions[0], actions[1])
+    assert not torch.equal(actions[0], actions[2])
+    snn = dataclasses.replace(task_config(task, SpikingSpec(), pop_size=6), num_bias=1)
+    snn_genomes = _genomes(snn, torch.float64)
+    actions = [rollout(task, make_controller(snn_genomes, dataclasses.replace(snn, bias_value=b), task, SpikingSpec()),
+                       seed=3, record=True).trace["action"] for b in (1.0, 0.5)]
+    assert not torch.equal(actions[0], actions[1])

@@ -92,6 +92,13 @@ def test_sigmoid_episodes_are_the_python_loops_bits(spec, dtype):
     _assert_same(native, python)
 
 
+def test_a_bias_value_runs_natively_to_the_python_loops_bits():
+    cfg = replace(markov_config("sigmoid"), bias_value=0.5)  # NEAT C++ 1.2.1's bias input
+    task = CartPoleTask.markov(max_steps=400)
+    native, python = _both(task, _genomes(cfg), cfg, SigmoidSpec(), "sigmoid", episodes=2)
+    _assert_same(native, python)
+
+
 @pytest.mark.parametrize("velocities", [True, False])
 @pytest.mark.parametrize("kind", ["snn", "sigmoid"])
 def test_double_pole_episodes_are_the_python_loops_bits(velocities, kind):

@@ -452,6 +452,7 @@ def test_the_presets_transcribe_the_two_parameter_files():
                       "conn_add_prob", "toggle_enable_prob", "gene_reenable_prob", "recur_only_prob"}
     assert (dpnv.toggle_enable_prob, dpnv.gene_reenable_prob, dpnv.recur_only_prob) == (0.1, 0.05, 0.2)
     assert (dpnv.pop_size, dpnv.weight_mutate_power, dpnv.compatibility_weight_coefficient) == (1000, 1.8, 3.0)
+    assert dpv.bias_value == dpnv.bias_value == 0.5  # the experiments' bias input, input[...] = .5
     assert not {"num_inputs", "num_outputs", "num_bias"} & (set(NEAT121_DPV) | set(NEAT121_DPNV))
     assert neat121_config("dpv", pop_size=20).pop_size == 20
     with pytest.raises(ConfigError, match="variant must be one of"):

@@ -1,6 +1,6 @@
 """NEAT 1.2.1's choice of the gene to split (``NEATConfig.node_add_neatc``): never a gene from a bias
-node, a walk in gene order in small genomes, 20 random tries in large ones; the same on both
-breeding paths."""
+node, the first good one of 20 random tries, in small genomes and large alike (NEAT 1.2.1's walk over
+a small genome's genes is dead code there); the same on both breeding paths."""
 
 from __future__ import annotations
 
@@ -36,32 +36,22 @@ def _split(conn, enabled, u: float):
     return (int(i), int(j)) if bool(ok) else None
 
 
-def test_a_small_genome_walks_its_genes_from_the_first_and_never_splits_a_bias_gene():
-    start = [(0, 4), (1, 4), (2, 4), (3, 4)]  # the DPNV start genome: three inputs and the bias to the output
-    conn, enabled = _genome(start)
-    # u >= 0.3: the walk stops at once, on the first gene; 0.09 <= u < 0.3: one step on, and so on
-    assert _split(conn, enabled, 0.95) == (0, 4) and _split(conn, enabled, 0.3) == (0, 4)
-    assert _split(conn, enabled, 0.2) == (1, 4)
-    assert _split(conn, enabled, 0.05) == (2, 4)
-    assert _split(conn, enabled, 0.01) is None  # past the last non-bias gene: the bias gene is never split
-    # the walk starts at the first enabled non-bias gene, and ends on a disabled one without a split
+def test_a_small_genome_never_splits_a_bias_gene_and_draws_its_genes_uniformly():
+    # The DPNV start genome: three inputs and the bias to the output. Three of four genes can be split:
+    # 20 tries all fail with (1/4)^20 (never, here); each of the three a third of the time, the bias never.
+    conn, enabled = _genome([(0, 4), (1, 4), (2, 4), (3, 4)])
+    u = (torch.arange(30_000, dtype=torch.float64) + 0.5) / 30_000
+    i, j, ok = _pick_split_neatc(conn.expand(len(u), N, N), enabled.expand(len(u), N, N), u, FIRST_BIAS, FIRST_OUTPUT)
+    assert bool(ok.all()) and bool((j == 4).all())
+    assert [float((i == k).double().mean()) for k in range(4)] == pytest.approx([1 / 3, 1 / 3, 1 / 3, 0.0], abs=1e-4)
+    # a disabled gene is never split either: the two enabled non-bias genes share the draws
     conn, enabled = _genome([(3, 4), (0, 4), (1, 4), (2, 4)], disabled=((1, 4),))
-    assert _split(conn, enabled, 0.95) == (0, 4)
-    assert _split(conn, enabled, 0.2) is None  # the next gene, (1, 4), is disabled
-    conn, enabled = _genome(start, disabled=((0, 4),))
-    assert _split(conn, enabled, 0.95) == (1, 4)
+    i, j, ok = _pick_split_neatc(conn.expand(len(u), N, N), enabled.expand(len(u), N, N), u, FIRST_BIAS, FIRST_OUTPUT)
+    fail = (1 - 2 / 4) ** SPLIT_TRIES
+    assert float((~ok).double().mean()) == pytest.approx(fail, abs=1e-4)
+    assert [float(((i == k) & ok).double().mean()) for k in range(4)] == pytest.approx([0.5, 0.0, 0.5, 0.0], abs=1e-4)
     conn, enabled = _genome([(3, 4)])
     assert _split(conn, enabled, 0.95) is None  # only a bias gene
-
-
-def test_the_walks_law_is_neat_1_2_1s():
-    # The first gene 70 %, the second 21 %, the third 6.3 %, none 2.7 % (three non-bias genes)
-    conn, enabled = _genome([(0, 4), (1, 4), (2, 4), (3, 4)])
-    u = (torch.arange(100_000, dtype=torch.float64) + 0.5) / 100_000
-    i, j, ok = _pick_split_neatc(conn.expand(len(u), N, N), enabled.expand(len(u), N, N), u, FIRST_BIAS, FIRST_OUTPUT)
-    share = [float(((i == k) & ok).double().mean()) for k in range(3)]
-    assert share == pytest.approx([0.7, 0.21, 0.063], abs=1e-4)
-    assert float((~ok).double().mean()) == pytest.approx(0.027, abs=1e-4)
 
 
 def test_a_large_genome_takes_the_first_good_gene_of_20_random_tries():
@@ -95,7 +85,7 @@ def test_the_option_changes_which_genes_split():
         split_from[on] = disabled[0].sum(0)[:, cfg.first_output]  # splits per source node
     assert int(split_from[False][cfg.num_inputs]) > 50  # uniformly: about a third from the bias
     assert int(split_from[True][cfg.num_inputs]) == 0
-    assert int(split_from[True][0]) > 2 * int(split_from[True][1])  # the walk favours the first gene
+    assert sum(int(split_from[True][k]) for k in range(cfg.num_inputs)) == int(split_from[False].sum())
 
 
 def _bred_alike_on_both_paths(g, cfg, seeds: list[int], *, one_species: bool):

@@ -187,9 +187,10 @@ def test_evaluations_are_also_counted_as_neat_121_counts_them(tmp_path):
     assert "Against NEAT C++ 1.2.1's own runs" in md and f"| {against['mann_whitney_p']:.3g} | 1/2 |" in md
 
 
-def test_neat_121s_test_takes_the_best_species_not_tested_since_it_improved():
-    """One champion per run and generation: the best species' first, then, while it does not
-    improve, the next species' champion; a species that improves is tested again."""
+def test_neat_121s_test_takes_the_best_unchecked_species_and_unchecks_on_a_record():
+    """One champion per run and generation (pole2_epoch): the best unchecked species' first, the best
+    species' when all are checked; a species is unchecked by a record of its best fitness and stays so
+    until tested, whatever its fitness does meanwhile."""
     from tasks.studies.double_pole import SpeciesChampionTest
 
     cfg = study_config("dpnv", "sigmoid", pop_size=6)
@@ -210,20 +211,31 @@ def test_neat_121s_test_takes_the_best_species_not_tested_since_it_improved():
     out = check(genomes, f)
     assert tested[-1][:, 0, 3].tolist() == [2.0, 1.0]  # species 1's champion; run 1: the first of two best
     assert out.tolist() == [[False] * 6, [False, True, False, False, False, False]]
-    check(genomes, f)  # nothing improved: run 0 tests species 0's champion (0.5) next
-    assert tested[-1][0, 0, 3] == 1.0
-    check(genomes, f)  # then species 2's first best
-    assert tested[-1][0, 0, 3] == 4.0
+    marks = []
+    for fitness in (f, f):  # nothing improves: species 0's champion (0.5) next, then species 2's first best
+        check(genomes, fitness)
+        marks.append(float(tested[-1][0, 0, 3]))
+    assert marks == [1.0, 4.0]
+    check(genomes, f)  # every species checked: the best species' champion again
+    assert tested[-1][0, 0, 3] == 2.0
     f2 = f.clone()
-    f2[0, 3] = 0.8  # species 1 improves: tested again, its new champion
+    f2[0, 3], f2[0, 5] = 0.8, 0.35  # species 1 and 2 set records: both unchecked, the better tested
     check(genomes, f2)
     assert tested[-1][0, 0, 3] == 3.0
+    check(genomes, f)  # species 2 fell back below its record but stays unchecked until tested
+    assert tested[-1][0, 0, 3] == 4.0
+    check(genomes, f)
+    assert tested[-1][0, 0, 3] == 2.0  # all checked again
+    assert len(tested) == 7  # one test every generation
     state = check.state_dict()
     again = SpeciesChampionTest(neat, test)
     again.load_state_dict(state)
-    assert again.tested == check.tested
+    assert again.checked == check.checked and again.record == check.record
+    assert again.record[0] == {10: 0.5, 11: 0.8, 12: 0.35}
     with pytest.raises(ValueError, match="must list 2 runs"):
-        again.load_state_dict({"tested": []})
+        again.load_state_dict({"checked": [], "record": []})
+    with pytest.raises(ValueError, match="before 2026-12-06"):
+        again.load_state_dict({"tested": [{}, {}]})
 
 
 def test_reproduce_dpnv_with_neat_121s_test_resumes_to_the_same_bits(tmp_path):
@@ -232,7 +244,7 @@ def test_reproduce_dpnv_with_neat_121s_test_resumes_to_the_same_bits(tmp_path):
     run_controller("dpnv", "sigmoid", [0, 1], 3, tmp_path / "split", progress=False, champion_test="species",
                    stop_after=1)
     saved = load_checkpoint_dict(tmp_path / "split" / "sigmoid.ckpt")
-    assert len(saved["solved_state"]["tested"]) == 2 and all(saved["solved_state"]["tested"])  # a species each
+    assert len(saved["solved_state"]["checked"]) == 2 and all(saved["solved_state"]["checked"])  # a species each
     resumed = run_controller("dpnv", "sigmoid", [0, 1], 3, tmp_path / "split", progress=False,
                              champion_test="species", resume=True)
     assert torch.equal(resumed.history, straight.history) and resumed.solved_generation == straight.solved_generation
@@ -390,7 +402,7 @@ def test_the_dpnv_per_gene_pick_is_the_neat121_file_with_its_weight_rule_and_pop
     assert changed | (NEAT121_DPNV_PER_GENE.keys() - NEAT121_DPNV.keys()) == {
         "pop_size", "weight_mutate_neatc", "weight_mutate_per_gene", "weight_mutate_rate", "weight_replace_rate",
         "conn_add_tries", "weight_init_uniform", "weight_init_stdev", "conn_add_shared_weight", "survival_neatc",
-        "stagnation_clock_before", "compat_mutation_num", "node_add_neatc"}
+        "stagnation_clock_before", "compat_mutation_num", "node_add_neatc", "bias_value"}
     cfg = STUDIES["dpnv"].config("sigmoid", ga="neat-1.2.1-dpnv-per-gene", coding="signed")
     assert cfg.pop_size == 300 and cfg.weight_mutate_per_gene and not cfg.weight_mutate_neatc
     assert cfg.weight_mutate_power == NEAT121_DPNV["weight_mutate_power"] and cfg.num_inputs == 3

@@ -78,28 +78,16 @@ static int64_t tries_law(double u, int64_t good, int64_t all, int64_t tries) {
 }
 
 /* [NEATC] Genome::mutate_add_node's gene to split, -1 for none: mutate.py's _pick_split_neatc, op by
-   op. Never a gene from a bias node (rows [first_bias, first_output)); under 15 genes a walk in slot
-   order from the first enabled one, on with 0.3 per step; else 20 random tries (the exact law of the
-   first good one, from the one uniform u). */
+   op. 20 random tries (the exact law of the first good one, from the one uniform u), a good gene
+   being enabled and not from a bias node (rows [first_bias, first_output)). */
 static int64_t split_neatc(const uint8_t *c, const uint8_t *e, int64_t N, double u, int64_t first_bias,
                            int64_t first_output) {
     const int64_t NN = N * N;
-    int64_t n = 0, m = 0, start = -1;
+    int64_t n = 0, m = 0;
     for (int64_t s = 0; s < NN; ++s) {
         if (!c[s]) continue;
         ++n;
-        const int bias = s / N >= first_bias && s / N < first_output;
-        if (!bias && e[s]) { ++m; if (start < 0) start = s; }
-    }
-    if (m == 0) return -1;
-    if (n < 15) {
-        int64_t k = 0; double p = 0.3;
-        while (k < 64 && u < p) { ++k; p *= 0.3; }
-        for (int64_t s = start; s < NN; ++s) {
-            if (!c[s] || (s / N >= first_bias && s / N < first_output)) continue;
-            if (k-- == 0) return e[s] ? s : -1;
-        }
-        return -1;
+        if (e[s] && !(s / N >= first_bias && s / N < first_output)) ++m;
     }
     int64_t k = tries_law(u, m, n, 20);
     if (k < 0) return -1;
