@@ -48,6 +48,7 @@ ABLATIONS: dict[str, tuple[dict, str, str]] = {
     "- the distance reads the weights, not mutation_num (ours)": ({"compat_mutation_num": False}, "signed",
                                                                   "neat-1.2.1"),
     "- any enabled gene split, bias genes too (ours)": ({"node_add_neatc": False}, "signed", "neat-1.2.1"),
+    "- bias input 1, not 0.5 (ours)": ({"bias_value": 1.0}, "signed", "neat-1.2.1"),
     "+ first fit against champions (NEAT 1.2.1's speciation)": ({"speciate_neatc": True}, "signed", "neat-1.2.1"),
     "- the study's coding ([0, 1] over its bounds)": ({}, "study", "neat-1.2.1"),
     "the study's tuned GA, signed coding": ({}, "signed", "tuned"),
