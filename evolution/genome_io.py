@@ -53,7 +53,8 @@ def genome_to_dict(genomes: Genomes, config: NEATConfig, run: int = 0, index: in
         "format": GENOME_FORMAT,
         "version": GENOME_VERSION,
         "layout": {"num_inputs": config.num_inputs, "num_bias": config.num_bias,
-                   "num_outputs": config.num_outputs, "num_nodes": config.num_nodes},
+                   "num_outputs": config.num_outputs, "num_nodes": config.num_nodes,
+                   **({"bias_value": config.bias_value} if config.bias_value != 1.0 else {})},
         "nodes": [{"id": i, "kind": node_kind(config, i)} for i in torch.nonzero(node).flatten().tolist()],
         "connections": [{"from": i, "to": j, "weight": weight[i, j].item(), "enabled": bool(enabled[i, j])}
                         for i, j in torch.nonzero(conn).tolist()],
@@ -82,6 +83,10 @@ def genome_from_dict(data: dict, config: NEATConfig, *, where: str = "<dict>",
     if not isinstance(layout, dict) or any(type(layout.get(k)) is not int or layout.get(k) != v
                                            for k, v in want.items()):
         raise _fail(where, f"layout {_short(layout)} does not match the config's {want}")
+    bias_value = layout.get("bias_value", 1.0)  # written only where it is not 1
+    if bias_value != config.bias_value:
+        raise _fail(where, f"layout bias_value {_short(bias_value)} does not match the config's "
+                           f"{config.bias_value} (the network would act differently)")
     N = config.num_nodes
     node = torch.zeros(N, dtype=torch.bool)
     node[: config.first_hidden] = True

@@ -63,6 +63,24 @@ def test_malformed_genome_files_name_file_and_fault(tmp_path, mutilate, match):
     assert "g.json" in str(exc.value)
 
 
+def test_a_genome_file_keeps_its_bias_value(tmp_path):
+    """A genome evolved with NEAT 1.2.1's bias input (``bias_value`` 0.5) loads only where the bias is
+    the same: elsewhere the network would act differently."""
+    import dataclasses
+
+    cfg = small_config()
+    g, _ = population(cfg)
+    half = dataclasses.replace(cfg, bias_value=0.5)
+    assert "bias_value" not in genome_to_dict(g, cfg)["layout"]  # files of bias 1 as before
+    path = save_genome(tmp_path / "half.json", g, half)
+    assert json.loads(path.read_text())["layout"]["bias_value"] == 0.5
+    assert torch.equal(load_genome(path, half).weight[0, 0], g.weight[0, 0])
+    with pytest.raises(CheckpointError, match="bias_value 0.5 does not match the config's 1.0"):
+        load_genome(path, cfg)
+    with pytest.raises(CheckpointError, match="bias_value 1.0 does not match the config's 0.5"):
+        load_genome(save_genome(tmp_path / "one.json", g, cfg), half)
+
+
 def test_truncated_genome_file(tmp_path):
     cfg = small_config()
     g, _ = population(cfg)
