@@ -83,16 +83,16 @@ static int64_t tries_law(double u, int64_t good, int64_t all, int64_t tries) {
 static int64_t split_neatc(const uint8_t *c, const uint8_t *e, int64_t N, double u, int64_t first_bias,
                            int64_t first_output) {
     const int64_t NN = N * N;
+#define SPLITTABLE(s) (c[s] && e[s] && !((s) / N >= first_bias && (s) / N < first_output))
     int64_t n = 0, m = 0;
     for (int64_t s = 0; s < NN; ++s) {
-        if (!c[s]) continue;
-        ++n;
-        if (e[s] && !(s / N >= first_bias && s / N < first_output)) ++m;
+        n += c[s] != 0;
+        m += SPLITTABLE(s);
     }
     int64_t k = tries_law(u, m, n, 20);
-    if (k < 0) return -1;
-    for (int64_t s = 0; s < NN; ++s)
-        if (c[s] && e[s] && !(s / N >= first_bias && s / N < first_output) && k-- == 0) return s;
+    for (int64_t s = 0; k >= 0 && s < NN; ++s)
+        if (SPLITTABLE(s) && k-- == 0) return s;
+#undef SPLITTABLE
     return -1;
 }
 
