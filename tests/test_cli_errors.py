@@ -51,6 +51,8 @@ def _one_line_error(capsys, argv, match):
                                                       "starts only for dpnv), got 4"),
     (["reproduce", "table2", "--champion-test", "species"], "'species' only for dpnv"),
     (["reproduce", "dpv", "--fitness", "damping-both-poles"], "'damping-both-poles' only for dpnv"),
+    (["reproduce", "dpv", "--min-general", "300"], "min_general: only dpnv count generalisation starts"),
+    (["reproduce", "dpnv", "--min-general", "626"], "min_general must be an int of generalisation starts in 0..625"),
 ])
 def test_bad_options_are_one_line_before_any_work(argv, match, capsys, tmp_path):
     out = tmp_path / "out"

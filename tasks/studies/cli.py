@@ -178,6 +178,7 @@ def _configs(args: argparse.Namespace) -> list:
     if args.command == "reproduce":  # options the study does not offer stop here, before any work
         for c in controllers:
             STUDIES[table].check(c, coding, args.champion_test, args.fitness_starts, args.fitness)
+        STUDIES[table].min_general(args.min_general)
     return [STUDIES[table].config(c, self_loops=args.self_loops, ga=args.ga, coding=coding) for c in controllers]
 
 
@@ -255,7 +256,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     results = {}
     common = dict(resume=args.resume, self_loops=args.self_loops, ga=args.ga, checkpoint_every=args.checkpoint_every,
                   device=args.device, progress=not args.quiet, coding=args.coding, champion_test=args.champion_test,
-                  fitness_starts=args.fitness_starts, fitness=args.fitness)
+                  fitness_starts=args.fitness_starts, fitness=args.fitness, min_general=args.min_general)
     with OutputLock(args.out, command):
         _clean(args.out)
         if args.resume and not _reproduce_checkpoints(args):
@@ -417,6 +418,10 @@ def build_parser() -> argparse.ArgumentParser:
                           "term sums x, x_dot, theta1 and theta1_dot) or 'damping-both-poles' (the short pole's angle "
                           "and angular velocity in the damping term too: NEAT-SNN's controllers then stop ringing "
                           "the short pole)")
+    rep.add_argument("--min-general", type=int, default=None, metavar="N",
+                     help="dpnv only: the generalisation starts (of 625) a solution must hold for 1000 steps besides "
+                          "the 100,000-step balance (default 200, NEAT 2002's test; more asks for more general "
+                          "solutions and costs evaluations)")
     rep.add_argument("--out", default=None, help="output folder (default: results/TABLE)")
     rep.add_argument("--resume", action="store_true", help="continue from the checkpoints in --out (--generations may change the budget of the unsolved runs, to one they have not passed)")
     rep.add_argument("--checkpoint-every", type=_positive_int, default=1, help="generations between checkpoints")

@@ -109,6 +109,7 @@ def merge_runs(parts: Sequence[ControllerRuns]) -> ControllerRuns:
              "ga": first.extra.get("ga", ""), "coding": first.extra.get("coding", "study"),
              "champion_test": first.extra.get("champion_test", "champion"),
              "fitness_starts": first.extra.get("fitness_starts", 1), "fitness": first.extra.get("fitness", "study"),
+             "min_general": first.extra.get("min_general"),
              "solved_position": [q for p in parts for q in p.extra.get("solved_position", [-1] * len(p.seeds))]}
     for key in ("cpu_s", "solve_test_cpu_s"):  # a shard without the figure (an old checkpoint) leaves it unknown
         if all(key in p.extra for p in parts):
@@ -162,7 +163,8 @@ def shard_layout(out: str | os.PathLike, controller: str, seeds: Sequence[int], 
 
 def _run_shard(task_name: str, shard: Shard, generations: int, self_loops: bool, checkpoint_every: int,
                device: str, threads: int | None, ga: str = "tuned", coding: str = "study",
-               champion_test: str | None = None, fitness_starts: int = 1, fitness: str = "study") -> ControllerRuns:
+               champion_test: str | None = None, fitness_starts: int = 1, fitness: str = "study",
+               min_general: int | None = None) -> ControllerRuns:
     """Run (or continue) one shard; what a Ray task runs, and what the local path runs."""
     if threads is not None:
         torch.set_num_threads(threads)
@@ -174,7 +176,7 @@ def _run_shard(task_name: str, shard: Shard, generations: int, self_loops: bool,
     return run_controller(task_name, shard.controller, shard.seeds, generations, shard.folder, resume=True,
                           self_loops=self_loops, ga=ga, checkpoint_every=checkpoint_every, device=device,
                           progress=False, coding=coding, champion_test=champion_test, fitness_starts=fitness_starts,
-                          fitness=fitness)
+                          fitness=fitness, min_general=min_general)
 
 
 def _finished_line(task_name: str, shard: Shard, count: int, r: ControllerRuns, done: int, total: int) -> str:
@@ -188,14 +190,15 @@ def run_controller_sharded(task_name: str, controller: str, seeds: list[int], ge
                            self_loops: bool = False, ga: str = "tuned", checkpoint_every: int = 1,
                            device: str | torch.device = "cpu", progress: bool = True,
                            coding: str = "study", champion_test: str | None = None,
-                           fitness_starts: int = 1, fitness: str = "study") -> ControllerRuns:
+                           fitness_starts: int = 1, fitness: str = "study",
+                           min_general: int | None = None) -> ControllerRuns:
     """Like :func:`run_controller`, but shard by shard in this process, following the
     manifest in ``OUT/shards`` (how ``--resume`` without ``--ray`` completes a Ray run)."""
     layout = shard_layout(out, controller, seeds, shards, resume=resume)
     parts = []
     for shard in layout:
         parts.append(_run_shard(task_name, shard, generations, self_loops, checkpoint_every, str(device), None, ga,
-                                coding, champion_test, fitness_starts, fitness))
+                                coding, champion_test, fitness_starts, fitness, min_general))
         if progress:
             print(_finished_line(task_name, shard, len(layout), parts[-1], len(parts), len(layout)), file=sys.stderr)
     return merge_runs(parts)
@@ -277,7 +280,7 @@ def run_controllers_on_ray(task_name: str, controllers: Sequence[str], seeds: li
                            device: str = "cpu", progress: bool = True, max_retries: int = 3,
                            cpus_per_shard: int = 1, coding: str = "study",
                            champion_test: str | None = None, fitness_starts: int = 1,
-                           fitness: str = "study") -> dict[str, ControllerRuns]:
+                           fitness: str = "study", min_general: int | None = None) -> dict[str, ControllerRuns]:
     """Evolve ``seeds`` of every controller as Ray tasks on the cluster at ``address``
     (``"auto"`` or ``"HOST:PORT"``), one task per shard, all controllers' shards in flight
     together; returns each controller's merged results, equal to :func:`run_controller`'s.
@@ -319,7 +322,8 @@ def run_controllers_on_ray(task_name: str, controllers: Sequence[str], seeds: li
         for layout in layouts.values():
             for shard in layout:
                 refs[remote.remote(task_name, shard, generations, self_loops, checkpoint_every, str(device),
-                                   cpus_per_shard, ga, coding, champion_test, fitness_starts, fitness)] = shard
+                                   cpus_per_shard, ga, coding, champion_test, fitness_starts, fitness,
+                                   min_general)] = shard
         total = len(refs)
         results: dict[tuple[str, int], ControllerRuns] = {}
         finished: list[Shard] = []

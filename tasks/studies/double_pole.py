@@ -44,7 +44,7 @@ from tasks.studies.generalization import (
 from tasks.studies.neat121_runs import neat121_runs
 from tasks.studies.registry import CONTROLLERS, STUDIES, ga_overrides
 
-__all__ = ["LONG_BALANCE_STEPS", "GENERALIZATION_PASS", "champion_solves", "champions_pass", "champions_test", "SpeciesChampionTest", "species_champion_test", "VARIANTS", "CODINGS", "PUSH_PULL_INPUT_NA", "NEAT121_SCALES", "POPULATION", "OBSERVATION_BOUNDS", "PUBLISHED", "study_task", "study_spec", "study_config",
+__all__ = ["LONG_BALANCE_STEPS", "GENERALIZATION_PASS", "GENERALIZATION_STARTS", "check_min_general", "champion_solves", "champions_pass", "champions_test", "SpeciesChampionTest", "species_champion_test", "VARIANTS", "CODINGS", "PUSH_PULL_INPUT_NA", "NEAT121_SCALES", "POPULATION", "OBSERVATION_BOUNDS", "PUBLISHED", "study_task", "study_spec", "study_config",
            "study_fitness", "study_solved", "damping_fitness_starts", "FITNESS_STARTS_SEED",
            "FITNESSES"]
 
@@ -65,6 +65,7 @@ POPULATION = {"dpv": 150, "dpnv": 1000}  # [NEAT02]
 OBSERVATION_BOUNDS = {"dpv": (2.4, 2.0, 0.3, 2.0, 0.3, 4.0), "dpnv": (2.4, 0.3, 0.3)}  # m, m/s, rad, rad/s
 LONG_BALANCE_STEPS = 100_000  # NEAT 2002: a champion must first balance this long from the standard start
 GENERALIZATION_PASS = 200  # NEAT 2002: of the 625 generalisation starts, a DPNV solution balances this many
+GENERALIZATION_STARTS = 625  # Gruau's grid: 5 fractions of each of 4 ranges (generalization_starts)
 DPNV_EPISODE_STEPS = 1000  # Gruau's damping fitness is measured over 1000 steps
 FITNESS_STARTS_SEED = 0  # the random starts of a multi-start DPNV fitness (damping_fitness_starts)
 # The fitnesses a study evolves on: "study", the variant's own (DPV: steps balanced; DPNV: Gruau's
@@ -316,32 +317,51 @@ class SpeciesChampionTest:
         self.record = [{int(k): float(v) for k, v in d.items()} for d in record]
 
 
+def check_min_general(min_general: int) -> int:
+    """``min_general`` if it is a count of the 625 generalisation starts (0-625), else a ``ValueError``
+    naming the field."""
+    if isinstance(min_general, bool) or not isinstance(min_general, int) or not 0 <= min_general <= GENERALIZATION_STARTS:
+        raise ValueError(f"min_general must be an int of generalisation starts in 0..{GENERALIZATION_STARTS}, "
+                         f"got {min_general!r}")
+    return min_general
+
+
 def species_champion_test(variant: str, controller: str, config: NEATConfig, neat,
-                          coding: str = "study") -> SpeciesChampionTest:
-    """NEAT C++ 1.2.1's test of a DPNV generation for ``neat``'s runs (``SpeciesChampionTest``)."""
+                          coding: str = "study", *, min_general: int = GENERALIZATION_PASS) -> SpeciesChampionTest:
+    """NEAT C++ 1.2.1's test of a DPNV generation for ``neat``'s runs (``SpeciesChampionTest``); a
+    solution holds ``min_general`` of the 625 generalisation starts (NEAT 2002: 200)."""
+    check_min_general(min_general)
     task, spec = study_task(variant, coding), study_spec(variant, controller, coding)
     return SpeciesChampionTest(neat, lambda champions: champions_pass(champions, config, spec,
-                                                                      min_general=GENERALIZATION_PASS, task=task))
+                                                                      min_general=min_general, task=task))
 
 
 def study_solved(variant: str, controller: str, config: NEATConfig, coding: str = "study", *,
-                 champion_test: str = "champion", neat=None) -> Callable[[Genomes, Tensor], Tensor] | None:
+                 champion_test: str = "champion", neat=None,
+                 min_general: int = GENERALIZATION_PASS) -> Callable[[Genomes, Tensor], Tensor] | None:
     """NEAT 2002's test of a generation as a ``solved_fn(genomes, fitness) -> [R, P]``, or None
     where the fitness threshold decides (DPV: a genome balanced the whole 100,000 steps). DPNV,
     ``champion_test="champion"``: the overall champion of each generation; ``"species"``: NEAT
-    C++ 1.2.1's choice of the champion to test, for ``neat``'s runs (``species_champion_test``)."""
+    C++ 1.2.1's choice of the champion to test, for ``neat``'s runs (``species_champion_test``).
+    ``min_general``: the generalisation starts (of 625) a DPNV solution holds for 1000 steps besides
+    the 100,000-step balance (NEAT 2002: 200, ``GENERALIZATION_PASS``); more asks for more general
+    solutions, at the cost of evaluations."""
     _check(variant, controller, coding)
+    check_min_general(min_general)
     if variant == "dpv":
+        if min_general != GENERALIZATION_PASS:
+            raise ValueError(f"min_general: only dpnv's test of a solution counts generalisation starts, got "
+                             f"{min_general!r} for dpv")
         return None
     task, spec = study_task(variant, coding), study_spec(variant, controller, coding)
     if champion_test == "species":
         if neat is None:
             raise ValueError("the species champion test needs the NEAT whose runs it tests (neat=)")
-        return species_champion_test(variant, controller, config, neat, coding)
+        return species_champion_test(variant, controller, config, neat, coding, min_general=min_general)
     if champion_test != "champion":
         raise ValueError(f"champion_test must be 'champion' or 'species', got {champion_test!r}")
 
     def solved(genomes: Genomes, fitness: Tensor) -> Tensor:
-        return champion_solves(genomes, fitness, config, spec, min_general=GENERALIZATION_PASS, task=task)
+        return champion_solves(genomes, fitness, config, spec, min_general=min_general, task=task)
 
     return solved

@@ -93,6 +93,8 @@ def study_rows(results: dict[str, ControllerRuns], variant: str, *, generalizati
             row["fitness_starts"] = r.extra["fitness_starts"]
         if r.extra.get("fitness", "study") != "study":
             row["fitness"] = r.extra["fitness"]
+        if r.extra.get("min_general") is not None:
+            row["min_general"] = r.extra["min_general"]
         for key, values in (("hidden_nodes", hidden), ("connections", conns), *(
                 (k, tests[k]) for k in ("generalization", "generalization_static_map") if k in tests)):
             row[f"{key}_mean_all"] = _mean(values)
@@ -163,6 +165,10 @@ def format_study_markdown(summary: dict, command: str) -> str:
         lines += ["", f"Fitness: the mean damping fitness over {k} episodes, from the standard start and {k - 1} fixed "
                   f"random starts within Gruau's ranges (`--fitness-starts {k}`); one evaluation is one genome of "
                   f"{k} episodes, so a run's episodes are {k} times its evaluations."]
+    for n in sorted({row["min_general"] for row in summary["rows"].values() if "min_general" in row}):
+        lines += ["", f"Test of a solution: the champion balances 100,000 steps from the standard start and {n} (not "
+                  f"NEAT 2002's 200) of the 625 generalisation starts for 1000 steps (`--min-general {n}`): a "
+                  f"stricter test when above 200, so the evaluations count to a more general solution."]
     if any(row.get("fitness") == "damping-both-poles" for row in summary["rows"].values()):
         lines += ["", "Fitness: Gruau's damping fitness with the short pole's angle and angular velocity added to its "
                   "damping term, which sums |x|, |x_dot|, |theta1| and |theta1_dot| over the last 100 steps "

@@ -115,6 +115,8 @@ class Study:
         multi_start_fitness: whether its fitness can run over several starts (``--fitness-starts``;
             ``study_fitness(..., fitness_starts=K)``); otherwise only the one start of its own.
         fitnesses: the fitnesses it evolves on (``--fitness``); the first, ``"study"``, is its own.
+        general_solutions: whether its test of a solution counts generalisation starts (``--min-general``;
+            ``study_solved(..., min_general=N)``, the module's ``GENERALIZATION_PASS`` by default).
     """
 
     name: str
@@ -126,6 +128,7 @@ class Study:
     champion_tests: tuple[str, ...] = ("champion",)
     multi_start_fitness: bool = False
     fitnesses: tuple[str, ...] = ("study",)
+    general_solutions: bool = False
     _cache: dict = field(default_factory=dict, compare=False, repr=False)
 
     def _impl(self):
@@ -155,6 +158,21 @@ class Study:
             raise ReproduceError(f"champion_test must be one of {self.champion_tests}"
                                  f"{_only_for('champion_tests', 'champion')}, got {champion_test!r} for {self.name}")
         return champion_test
+
+    def min_general(self, min_general: int | None) -> int | None:
+        """``min_general`` checked (``ReproduceError`` naming the field), None for the study's own
+        (None, or the value it uses by default), so a checkpoint's identity holds one spelling."""
+        if min_general is None:
+            return None
+        if not self.general_solutions:
+            offered = [s.name for s in STUDIES.values() if s.general_solutions]
+            raise ReproduceError(f"min_general: only {', '.join(offered)} count generalisation starts in the test "
+                                 f"of a solution, got {min_general!r} for {self.name}")
+        try:
+            self._impl().check_min_general(min_general)
+        except ValueError as exc:
+            raise ReproduceError(str(exc)) from None
+        return None if min_general == self._impl().GENERALIZATION_PASS else min_general
 
     def ga_choice(self, controller: str, ga: str = "tuned") -> tuple[str, dict]:
         """``(preset, extra overrides)`` for ``ga``: a preset as it is, or ``"tuned"``: the controller's pick."""
@@ -196,13 +214,16 @@ class Study:
         return self._impl().study_fitness(self.name, controller, config, coding, **extra)
 
     def solved(self, controller: str, config, coding: str = "study", *, champion_test: str | None = None,
-               neat=None):
+               neat=None, min_general: int | None = None):
         """``solved_fn(genomes, fitness) -> [R, P]`` bool, or None where the config's fitness threshold
         decides. ``champion_test``: one the study offers (default: its first); a test that keeps
-        a record per run (DPNV's ``"species"``) needs the ``neat`` whose runs it tests."""
+        a record per run (DPNV's ``"species"``) needs the ``neat`` whose runs it tests.
+        ``min_general``: the generalisation starts a solution holds, where the study counts them
+        (``general_solutions``; None: the study's own)."""
         champion_test = self.check(controller, coding, champion_test)
+        extra = {} if self.min_general(min_general) is None else {"min_general": min_general}
         return self._impl().study_solved(self.name, controller, config, coding, champion_test=champion_test,
-                                         neat=neat)
+                                         neat=neat, **extra)
 
     def write_report(self, results: dict, out, *, command: str, generalization: bool = True) -> list:
         """Write the study's report of ``results`` (controller -> ``ControllerRuns``) to ``out``."""
@@ -249,7 +270,7 @@ STUDIES: Mapping[str, Study] = MappingProxyType({s.name: s for s in (
           "the 625 generalisation starts", "tasks.studies.double_pole",
           {"sigmoid": _NEAT_PYTHON_01, "snn": _NEAT_PYTHON_01}, _DOUBLE_POLE_REPORT,
           codings=_DOUBLE_POLE_CODINGS, champion_tests=("species", "champion"), multi_start_fitness=True,
-          fitnesses=_DPNV_FITNESSES),
+          fitnesses=_DPNV_FITNESSES, general_solutions=True),
 )})
 
 

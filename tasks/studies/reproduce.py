@@ -34,7 +34,8 @@ __all__ = ["TASKS", "ReproduceError", "ControllerRuns", "run_controller", "study
            "FIG8_MAX_PAD"]
 
 TASKS = tuple(STUDIES)
-IDENTITY_DEFAULTS = {"coding": "study", "champion_test": "champion", "fitness_starts": 1, "fitness": "study"}  # checkpoints from before the key: this value
+IDENTITY_DEFAULTS = {"coding": "study", "champion_test": "champion", "fitness_starts": 1, "fitness": "study",
+                     "min_general": None}  # checkpoints from before the key: this value
 # Fig. 8 draws solved runs' final best up to the budget, or this many generations where the
 # budget is larger (evolution itself may go on longer; its generations are all drawn).
 FIG8_MAX_PAD = 10_000
@@ -103,7 +104,7 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
                    device: str | torch.device = "cpu", progress: bool = True,
                    stop_after: int | None = None, coding: str = "study",
                    champion_test: str | None = None, fitness_starts: int = 1,
-                   fitness: str = "study") -> ControllerRuns:
+                   fitness: str = "study", min_general: int | None = None) -> ControllerRuns:
     """Evolve ``controller`` on the study ``task_name`` (``STUDIES``) for each seed (one batch),
     checkpointing to ``out``.
 
@@ -121,10 +122,13 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
     ``tasks.studies.double_pole.damping_fitness_starts``); 1, the default, is the study's own.
     ``fitness``: one of the study's ``fitnesses`` (``"study"``, its own, the default; DPNV also
     ``"damping-both-poles"``).
+    ``min_general``: the generalisation starts (of 625) a solution holds, where the study's test
+    counts them (DPNV; None: its own, NEAT 2002's 200).
     ``stop_after`` (generations in this call) exists for tests of interruption.
     """
     s = study(task_name)
     champion_test = s.check(controller, coding, champion_test, fitness_starts, fitness)
+    min_general = s.min_general(min_general)
     preset, ga_extra = s.ga_choice(controller, ga)
     if checkpoint_every < 1:
         raise ReproduceError(f"checkpoint_every must be >= 1, got {checkpoint_every}")
@@ -134,13 +138,13 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
     ga_text = describe_ga(preset, ga_extra)
     identity = {"task": task_name, "controller": controller, "seeds": list(seeds), "generations": generations,
                 "self_loops": self_loops, "ga": ga_text, "coding": coding, "champion_test": champion_test,
-                "fitness_starts": fitness_starts, "fitness": fitness}
+                "fitness_starts": fitness_starts, "fitness": fitness, "min_general": min_general}
     neat, data = open_run(path, identity, resume=resume, device=device, missing_ok=True, defaults=IDENTITY_DEFAULTS,
                           fresh=lambda: NEAT(s.config(controller, self_loops=self_loops, ga=ga, coding=coding),
                                              seeds=seeds, device=device))
     config = neat.config
     fitness_fn = s.fitness(controller, config, coding, fitness_starts, fitness)
-    solved_fn = s.solved(controller, config, coding, champion_test=champion_test, neat=neat)
+    solved_fn = s.solved(controller, config, coding, champion_test=champion_test, neat=neat, min_general=min_general)
     if data.get("solved_state") is not None and hasattr(solved_fn, "load_state_dict"):
         try:
             solved_fn.load_state_dict(data["solved_state"])
@@ -179,6 +183,7 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
                           champions=neat.best_genomes.to("cpu"), config=config, wall_s=checkpoint.wall_s,
                           extra={"complete": checkpoint.finished(neat), "ga": ga_text, "coding": coding,
                                  "champion_test": champion_test, "fitness_starts": fitness_starts, "fitness": fitness,
+                                 "min_general": min_general,
                                  "cpu_s": cpu_before + time.process_time() - cpu_start,
                                  "solve_test_cpu_s": 0.0 if timed is None else timed.cpu_s,
                                  "solved_position": neat.solved_position.cpu().tolist()})

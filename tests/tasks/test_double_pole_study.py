@@ -9,6 +9,7 @@ import torch
 
 from evolution import NEAT, TaskFitness
 from evolution.checkpoint import load_checkpoint_dict
+from tasks.studies.distributed import run_controller_sharded
 from tasks.studies.double_pole import (
     CODINGS,
     DPNV_EPISODE_STEPS,
@@ -331,6 +332,66 @@ def test_reproduce_dpnv_with_fitness_starts_records_them_and_resumes_only_with_t
             run_controller("dpnv", "sigmoid", [0], 1, tmp_path / "bad", fitness_starts=bad, **kw)
     with pytest.raises(ReproduceError, match="fitness_starts must be 1 for table2"):
         run_controller("table2", "sigmoid", [0], 1, tmp_path / "t2", progress=False, fitness_starts=3)
+
+
+def test_min_general_is_the_generalisation_starts_a_dpnv_solution_must_hold(monkeypatch):
+    """Both tests of a generation accept a champion that balances 100,000 steps only when it holds
+    ``min_general`` of the 625 starts: the count it holds passes, one more fails."""
+    import tasks.studies.double_pole as dp
+
+    held = 250  # a fake plant: every champion balances the long run and the first `held` starts
+
+    def balanced(champions, config, spec=None, *, velocities=False, max_steps=None, starts=None, task=None):
+        R = champions.num_runs
+        if starts is None:
+            return torch.full((R, 1, 1), max_steps)
+        return (torch.arange(starts.shape[0]) < held).long().mul(1000).expand(R, 1, -1)
+
+    monkeypatch.setattr(dp, "balanced_steps", balanced)
+    cfg = study_config("dpnv", "sigmoid", pop_size=6)
+    neat = NEAT(cfg, seeds=[0, 1])
+    genomes = neat.ask()
+    fitness = torch.rand(2, 6, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
+    for test in ("champion", "species"):
+        def solves(n, test=test):
+            kw = {} if n is None else {"min_general": n}
+            return study_solved("dpnv", "sigmoid", cfg, champion_test=test, neat=neat, **kw)(genomes, fitness)
+
+        assert solves(None).sum(-1).tolist() == [1, 1]  # NEAT 2002's 200
+        assert solves(held).sum(-1).tolist() == [1, 1] and not bool(solves(held + 1).any()), test
+    assert dp.champions_test(genomes.gather(torch.zeros(2, 1, dtype=torch.long)), cfg)[1].tolist() == [held, held]
+    for bad in (-1, 626, 300.0, True):
+        with pytest.raises(ValueError, match=r"min_general must be an int of generalisation starts in 0\.\.625"):
+            study_solved("dpnv", "sigmoid", cfg, min_general=bad)
+    with pytest.raises(ValueError, match="only dpnv's test of a solution counts generalisation starts"):
+        study_solved("dpv", "sigmoid", study_config("dpv", "sigmoid"), min_general=300)
+
+
+def test_reproduce_dpnv_with_min_general_records_it_and_resumes_only_with_it(tmp_path):
+    kw = dict(progress=False, ga="neat-1.2.1-dpnv-per-gene", coding="signed")
+    out = tmp_path / "m300"
+    r = run_controller("dpnv", "sigmoid", [0], 1, out, min_general=300, **kw)
+    assert r.extra["min_general"] == 300
+    with pytest.raises(ReproduceError, match=r"min_general=300, this call asks for min_general=None"):
+        run_controller("dpnv", "sigmoid", [0], 1, out, resume=True, **kw)
+    # NEAT 2002's 200, named or not, is one identity: a run resumes whichever way it is spelled
+    one = run_controller("dpnv", "sigmoid", [0], 1, tmp_path / "m200", min_general=200, **kw)
+    assert one.extra["min_general"] is None
+    run_controller("dpnv", "sigmoid", [0], 2, tmp_path / "m200", resume=True, **kw)
+    write_study_report({"sigmoid": r}, "dpnv", out, command="test", generalization=False)
+    md = (out / "dpnv.md").read_text()
+    assert "and 300 (not NEAT 2002's 200) of the 625 generalisation starts" in md and "`--min-general 300`" in md
+    assert json.loads((out / "summary.json").read_text())["rows"]["sigmoid"]["min_general"] == 300
+    assert "min_general" not in study_rows({"sigmoid": one}, "dpnv", generalization=False)["rows"]["sigmoid"]
+    with pytest.raises(ReproduceError, match="min_general: only dpnv count generalisation starts"):
+        run_controller("table2", "sigmoid", [0], 1, tmp_path / "t2", progress=False, min_general=300)
+    # the shards (the Ray path's tasks) carry it too
+    sharded = run_controller_sharded("dpnv", "sigmoid", [0, 1], 1, tmp_path / "sh", shards=2, min_general=300, **kw)
+    assert sharded.extra["min_general"] == 300
+    shards = sorted((tmp_path / "sh" / "shards").glob("sigmoid-*/sigmoid.ckpt"))
+    assert len(shards) == 2 and all(load_checkpoint_dict(p)["identity"]["min_general"] == 300 for p in shards)
+    with pytest.raises(ReproduceError, match=r"in 0\.\.625, got 700"):
+        run_controller("dpnv", "sigmoid", [0], 1, tmp_path / "bad", min_general=700, **kw)
 
 
 def test_the_both_poles_fitness_is_the_damping_fitness_that_sees_the_short_pole():
