@@ -411,8 +411,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "every generation ('champion', the default before 2026-12-03)")
     rep.add_argument("--fitness-starts", type=_positive_int, default=1, metavar="K",
                      help="dpnv only: the damping fitness averaged over K episodes, from the standard start and K-1 "
-                          "fixed random starts within Gruau's ranges (default 1: NEAT 2002's fitness; 32 gave "
-                          "solutions that hold 300 of the 625 starts; one evaluation is then K episodes)")
+                          "fixed random starts within Gruau's ranges (default 1: NEAT 2002's fitness; 64, with --min-general "
+                          "250, gave solutions that hold 314 of the 625 starts; one evaluation is then K episodes)")
     rep.add_argument("--fitness", choices=FITNESSES, default=FITNESSES[0],
                      help="dpnv only: the fitness evolved on: 'study' (default: Gruau's damping fitness, whose damping "
                           "term sums x, x_dot, theta1 and theta1_dot) or 'damping-both-poles' (the short pole's angle "
