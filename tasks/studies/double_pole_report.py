@@ -167,8 +167,9 @@ def format_study_markdown(summary: dict, command: str) -> str:
                   f"{k} episodes, so a run's episodes are {k} times its evaluations."]
     for n in sorted({row["min_general"] for row in summary["rows"].values() if "min_general" in row}):
         lines += ["", f"Test of a solution: the champion balances 100,000 steps from the standard start and {n} (not "
-                  f"NEAT 2002's 200) of the 625 generalisation starts for 1000 steps (`--min-general {n}`): a "
-                  f"stricter test when above 200, so the evaluations count to a more general solution."]
+                  f"NEAT 2002's 200) of the 625 generalisation starts for 1000 steps (`--min-general {n}`): "
+                  + ("a stricter test, so the evaluations count to a more general solution." if n > 200 else
+                     "a looser test, so the evaluations count to a less general solution.")]
     if any(row.get("fitness") == "damping-both-poles" for row in summary["rows"].values()):
         lines += ["", "Fitness: Gruau's damping fitness with the short pole's angle and angular velocity added to its "
                   "damping term, which sums |x|, |x_dot|, |theta1| and |theta1_dot| over the last 100 steps "

@@ -381,6 +381,11 @@ def test_reproduce_dpnv_with_min_general_records_it_and_resumes_only_with_it(tmp
     write_study_report({"sigmoid": r}, "dpnv", out, command="test", generalization=False)
     md = (out / "dpnv.md").read_text()
     assert "and 300 (not NEAT 2002's 200) of the 625 generalisation starts" in md and "`--min-general 300`" in md
+    assert "a stricter test" in md
+    looser = study_rows({"sigmoid": r}, "dpnv", generalization=False)
+    looser["rows"]["sigmoid"]["min_general"] = 150
+    looser.update(seeds=[0])
+    assert "a looser test" in format_study_markdown(looser, "cmd")
     assert json.loads((out / "summary.json").read_text())["rows"]["sigmoid"]["min_general"] == 300
     assert "min_general" not in study_rows({"sigmoid": one}, "dpnv", generalization=False)["rows"]["sigmoid"]
     with pytest.raises(ReproduceError, match="min_general: only dpnv count generalisation starts"):
