@@ -13,7 +13,16 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from tasks.studies.double_pole import NEAT121_SCALES, PUBLISHED, PUSH_PULL_INPUT_NA, study_spec, study_task
+from tasks.studies.double_pole import (
+    GENERALIZATION_PASS,
+    GENERALIZATION_STARTS,
+    LONG_BALANCE_STEPS,
+    NEAT121_SCALES,
+    PUBLISHED,
+    PUSH_PULL_INPUT_NA,
+    study_spec,
+    study_task,
+)
 from tasks.studies.generalization import GENERALIZATION_STEPS, generalization_starts
 from tasks.studies.neat121_runs import compare_with_neat121
 from tasks.studies.results import (
@@ -166,9 +175,10 @@ def format_study_markdown(summary: dict, command: str) -> str:
                   f"random starts within Gruau's ranges (`--fitness-starts {k}`); one evaluation is one genome of "
                   f"{k} episodes, so a run's episodes are {k} times its evaluations."]
     for n in sorted({row["min_general"] for row in summary["rows"].values() if "min_general" in row}):
-        lines += ["", f"Test of a solution: the champion balances 100,000 steps from the standard start and {n} (not "
-                  f"NEAT 2002's 200) of the 625 generalisation starts for 1000 steps (`--min-general {n}`): "
-                  + ("a stricter test, so the evaluations count to a more general solution." if n > 200 else
+        lines += ["", f"Test of a solution: the champion balances {LONG_BALANCE_STEPS:,} steps from the standard start "
+                  f"and {n} (not NEAT 2002's {GENERALIZATION_PASS}) of the {GENERALIZATION_STARTS} generalisation "
+                  f"starts for {GENERALIZATION_STEPS} steps (`--min-general {n}`): "
+                  + ("a stricter test, so the evaluations count to a more general solution." if n > GENERALIZATION_PASS else
                      "a looser test, so the evaluations count to a less general solution.")]
     if any(row.get("fitness") == "damping-both-poles" for row in summary["rows"].values()):
         lines += ["", "Fitness: Gruau's damping fitness with the short pole's angle and angular velocity added to its "
@@ -264,7 +274,7 @@ def _plot_generalization(summary: dict):
     if data:
         ax.boxplot(data)
         ax.set_xticks(range(1, len(names) + 1), names, fontsize=8)
-    ax.axhline(200, color="grey", ls="--", lw=1, label="NEAT 2002's pass mark (200)")
+    ax.axhline(GENERALIZATION_PASS, color="grey", ls="--", lw=1, label=f"NEAT 2002's pass mark ({GENERALIZATION_PASS})")
     ax.set_ylabel("starts balanced for 1000 steps (of 625)")
     ax.set_title("Generalisation of every run's champion, and the memory ablation")
     ax.legend(fontsize=8)
