@@ -28,38 +28,37 @@ defaults (``as_spec``). Each controller's encoders and decoders are modules of
 from __future__ import annotations
 
 import functools
-import math
-from dataclasses import dataclass
 from typing import NamedTuple
 
 import torch
 from torch import Tensor, nn
 
 from evolution.config import NEATConfig
-from evolution.input_coding import check_coding, inputs_per_observation
+from evolution.defaults import TASK_GA, default_spec
+from evolution.input_coding import inputs_per_observation
 from evolution.population import Genomes
+from evolution.specs import (
+    DECODER_CODES,
+    ENCODERS,
+    NEAT_SIGMOID_SLOPE,
+    SIGMOID_DECODERS,
+    SPIKING_DECODERS,
+    SigmoidSpec,
+    SpikingSpec,
+)
 from snn_torch.functional.counter_rng import fnv1a_keys
 from snn_torch.functional.decode import ordered_matvec
 from snn_torch.functional.izhikevich import (
-    QIU2019,
     IzhikevichParams,
     IzhikevichState,
-    check_dt,
-    check_params,
     izhikevich_init,
     izhikevich_run,
 )
-from snn_torch.functional.recurrent import RecurrentState, SynapticState, synaptic_decay
+from snn_torch.functional.recurrent import RecurrentState, SynapticState
 from snn_torch.kernels.network import RateControlKernel
 from snn_torch.modules.coding import (
-    BangBang,
-    BernoulliEncoder,
-    CurrentEncoder,
-    LinearReadout,
     RateWindow,
     RateWindowState,
-    SigmoidForce,
-    UnitForce,
 )
 from snn_torch.modules.recurrent import PopulationRecurrentIzhikevich, PopulationRecurrentSigmoid
 
@@ -68,144 +67,6 @@ __all__ = ["SpikingSpec", "SigmoidSpec", "SpikingController", "SigmoidController
            "SIGMOID_DECODERS", "make_controller", "spiking_config", "SPIKING_SIGMA", "sigmoid_config", "task_config",
            "as_spec", "spec_name", "check_controller_config", "CONTROLLERS", "CONTROLLER_NAMES", "register_controller",
            "network_inputs"]
-
-NEAT_SIGMOID_SLOPE = 4.9  # [NEAT02]
-# The spiking controller's encoders, name -> module from (spec, substeps per control step).
-ENCODERS = {
-    "current": lambda spec, substeps: CurrentEncoder(spec.i_input_max),
-    "bernoulli": lambda spec, substeps: BernoulliEncoder(spec.input_rate_max_hz, dt_ms=spec.dt_ms, substeps=substeps),
-}
-# Each controller's decoders, name -> module from (action_max, spec). The spiking ones read the
-# drive ``d`` with the genome's gain sigma: ``sigmoid_force`` inside the sigmoid, ``linear`` as a
-# factor, ``bang_bang`` not at all (one threshold rule for both controllers: ``BangBang``, strict >).
-SPIKING_DECODERS = {
-    "sigmoid_force": lambda a_max, spec: SigmoidForce(a_max),
-    "bang_bang": lambda a_max, spec: BangBang(a_max, spec.threshold),
-    "linear": lambda a_max, spec: LinearReadout(a_max, low=-a_max, high=a_max),
-}
-SIGMOID_DECODERS = {
-    "sigmoid_force": lambda a_max, spec: UnitForce(a_max),
-    "bang_bang": lambda a_max, spec: BangBang(a_max, threshold=0.5),
-}
-DECODER_CODES = {"sigmoid_force": 0, "bang_bang": 1, "linear": 2}  # the C decoders' (recurrent_izhikevich.h, episodes.h)
-
-
-@dataclass(frozen=True)
-class SpikingSpec:
-    """A spiking controller's physics and coding, in one place. Defaults: the choices made for
-    Qiu et al.'s non-Markov cart-pole (the paper gives none of these values).
-
-    Attributes:
-        neuron: Izhikevich parameters of every node ([Qiu19] Fig. 2's neuron).
-        dt_ms: substep (ms); snn_torch's validated default: rates within 3 Hz + 5 % of a fine
-            reference. A control step is ``task.control_period_s / dt`` substeps.
-        i_background: current into every neuron (mV/ms, the paper's nA). Alone a neuron then
-            fires at ~270 Hz, high on Fig. 2's f-I curve, so inhibitory input lowers its rate
-            instead of silencing it ([Qiu19]'s "frequency sufficiency"). The choice that mattered
-            most: tuning seeds 5000-5031 solved every run for 20 to 60 nA, 5/16 at 5 nA, none at 0.
-        synapse_kick_mv: mV jump of the postsynaptic membrane per presynaptic spike per unit
-            weight (a current of ``w * kick / dt_ms`` for one substep, so it does not depend on
-            dt; Izhikevich 2003's networks add ``w`` for one 1 ms step).
-        synapse_tau_ms: time constant (ms) of exponential (current-based) synapses: a spike's
-            charge, the same as above, arrives spread over about ``tau``, so a neuron also sees
-            a lagged copy of its input (memory across control steps). 0 (default): it arrives in
-            one substep. Above 0 the C kernels run it too; the compiled (CUDA) step does not.
-        encoder: ``"current"``: input node ``k`` gets ``i_input_max * x_k`` (mV/ms) on top of the
-            background; ``"bernoulli"``: input nodes are spike sources firing with probability
-            ``x_k * input_rate_max_hz * dt`` per substep, keyed by a hash of the genome.
-        i_input_max: mV/ms at normalised input 1 (~270 -> ~700 Hz with the background); also
-            the current into bias nodes.
-        input_rate_max_hz: the Bernoulli encoder's rate at input 1 ([Qiu19]'s Markov task: the
-            normalised value is the spike probability per step: 1000 Hz at 0.5 ms is p = 0.5).
-        decoder: from the rates ``r_j`` of the nodes wired to output ``k`` with weights ``w_jk``,
-            the drive ``d_k = sum_j w_jk (r_j - rest_j)`` (Hz x weight; ``rest_j`` = 0 unless
-            ``rest_relative``). ``"sigmoid_force"``: ``a = a_max (2 sigmoid(sigma d) - 1)``
-            ([Qiu19] eq. 10); ``"bang_bang"``: ``a = +-a_max`` on ``d > threshold``;
-            ``"linear"``: ``a = clamp(sigma d, -1, 1) a_max``. ``sigma``: the genome's evolved gain.
-        rate_window_steps: control steps in the firing-rate window.
-        rest_relative: rates relative to each node's rate at rest (inputs: at the middle of
-            their range; neurons: under the background current alone, ``rest_rate_hz``).
-        threshold: the bang-bang decoder's threshold on the drive.
-        input_coding: how observations become inputs (``evolution.input_coding``): ``"unit"``
-            ([0, 1] over the task's bounds, the paper's), ``"signed"`` ([-1, 1] about the
-            middle: a current below the background's under the middle; not with the Bernoulli
-            encoder) or ``"push_pull"`` (two input nodes per variable, the positive and the
-            negative part of the signed value); ``clip_inputs``: clip the signed value to [-1, 1].
-    """
-
-    neuron: IzhikevichParams = QIU2019
-    dt_ms: float = 0.5
-    i_background: float = 30.0
-    synapse_kick_mv: float = 1.0
-    synapse_tau_ms: float = 0.0
-    encoder: str = "current"
-    i_input_max: float = 60.0
-    input_rate_max_hz: float = 1000.0
-    decoder: str = "sigmoid_force"
-    rate_window_steps: int = 4
-    rest_relative: bool = False
-    threshold: float = 0.0
-    input_coding: str = "unit"
-    clip_inputs: bool = True
-
-    def __post_init__(self) -> None:
-        check_coding("SpikingSpec", self.input_coding, self.clip_inputs)
-        if self.encoder == "bernoulli" and self.input_coding == "signed":
-            raise ValueError("SpikingSpec.input_coding='signed' cannot drive the Bernoulli encoder (a spike "
-                             "probability is not negative): use 'push_pull'")
-        check_dt(self.dt_ms)
-        check_params(self.neuron)
-        try:
-            synaptic_decay(self.synapse_tau_ms, self.dt_ms)
-        except ValueError as exc:
-            raise ValueError(f"SpikingSpec.{exc}") from None
-        for name in ("i_background", "i_input_max", "input_rate_max_hz", "synapse_kick_mv", "threshold"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise ValueError(f"SpikingSpec.{name} must be a finite number, got {value!r}")
-        if self.input_rate_max_hz < 0:
-            raise ValueError(f"SpikingSpec.input_rate_max_hz must be >= 0, got {self.input_rate_max_hz!r}")
-        if self.encoder not in ENCODERS:
-            raise ValueError(f"SpikingSpec.encoder must be one of {tuple(ENCODERS)}, got {self.encoder!r}")
-        if self.decoder not in SPIKING_DECODERS:
-            raise ValueError(f"SpikingSpec.decoder must be one of {tuple(SPIKING_DECODERS)}, got {self.decoder!r}")
-        if isinstance(self.rate_window_steps, bool) or not isinstance(self.rate_window_steps, int) \
-                or self.rate_window_steps < 1:
-            raise ValueError(f"SpikingSpec.rate_window_steps must be an int >= 1, got {self.rate_window_steps!r}")
-        if self.encoder == "bernoulli" and self.input_rate_max_hz * self.dt_ms / 1000.0 > 1.0 + 1e-12:
-            raise ValueError("SpikingSpec.input_rate_max_hz * dt_ms must be at most one spike per substep")
-
-    def substeps(self, period_s: float) -> int:
-        """Substeps of ``dt_ms`` in a control period of ``period_s`` seconds (a whole number)."""
-        substeps = int(round(period_s * 1000.0 / self.dt_ms))
-        if substeps < 1 or abs(substeps * self.dt_ms - period_s * 1000.0) > 1e-9:
-            raise ValueError(f"the control period ({period_s * 1000} ms) must be a whole number of dt_ms "
-                             f"({self.dt_ms} ms)")
-        return substeps
-
-
-@dataclass(frozen=True)
-class SigmoidSpec:
-    """A sigmoid controller's choices: ``updates_per_step`` network updates per control step
-    (NEAT pole balancing: 1) and the decoder of the outputs ``y`` in (0, 1):
-    ``"sigmoid_force"``: ``a = a_max (2 y - 1)``; ``"bang_bang"``: ``a = +-a_max`` on ``y > 0.5``.
-    ``input_coding`` and ``clip_inputs``: the input nodes' values (``evolution.input_coding``:
-    ``"unit"`` [0, 1], ``"signed"`` [-1, 1], ``"push_pull"`` two nodes per variable)."""
-
-    updates_per_step: int = 1
-    decoder: str = "sigmoid_force"
-    slope: float = NEAT_SIGMOID_SLOPE
-    input_coding: str = "unit"
-    clip_inputs: bool = True
-
-    def __post_init__(self) -> None:
-        check_coding("SigmoidSpec", self.input_coding, self.clip_inputs)
-        if isinstance(self.updates_per_step, bool) or not isinstance(self.updates_per_step, int) \
-                or self.updates_per_step < 1:
-            raise ValueError(f"SigmoidSpec.updates_per_step must be an int >= 1, got {self.updates_per_step!r}")
-        if self.decoder not in SIGMOID_DECODERS:
-            raise ValueError(f"SigmoidSpec.decoder must be one of {tuple(SIGMOID_DECODERS)}, got {self.decoder!r}")
-
 
 @functools.lru_cache(maxsize=32)
 def rest_rate_hz(neuron: IzhikevichParams, current: float, dt_ms: float) -> float:
@@ -241,15 +102,18 @@ def sigmoid_config(num_inputs: int, num_outputs: int = 1, **overrides) -> NEATCo
                          "sigma_init_stdev": 0.0, "compatibility_sigma_coefficient": 0.0, **overrides})
 
 
-def as_spec(spec: SpikingSpec | SigmoidSpec | str | None = None):
+def as_spec(spec: SpikingSpec | SigmoidSpec | str | None = None, task=None):
     """The spec a controller is made from: a spec as it is; a name of ``CONTROLLER_NAMES``
-    (``"snn"``, ``"sigmoid"``) for that spec's defaults; None for ``SpikingSpec()``. Anything
-    else is a ``ValueError`` naming the choices."""
+    (``"snn"``, ``"sigmoid"``) for the defaults for ``task`` (``evolution.defaults.default_spec``:
+    signed inputs, and what the task's control period asks), or that spec type's own defaults
+    without a task; None for ``SpikingSpec()``. Anything else is a ``ValueError`` naming the choices."""
     if spec is None:
         return SpikingSpec()
     if isinstance(spec, str):
         if spec not in CONTROLLER_NAMES:
             raise ValueError(f"a controller name must be one of {tuple(CONTROLLER_NAMES)}, got {spec!r}")
+        if task is not None and spec in ("snn", "sigmoid"):
+            return default_spec(task, spec)
         return CONTROLLER_NAMES[spec]()
     if type(spec) not in CONTROLLERS:
         raise ValueError(f"spec must be one of {[t.__name__ for t in CONTROLLERS]} or a name of "
@@ -264,13 +128,18 @@ def spec_name(spec) -> str:
 
 
 def task_config(task, spec: SpikingSpec | SigmoidSpec | str | None = "snn", **overrides) -> NEATConfig:
-    """A ``NEATConfig`` for the controller of ``spec`` (a spec, or its name ``"snn"`` / ``"sigmoid"``)
-    on ``task`` (an ``evolution.Task``): its inputs and outputs from the task's observations (as the
-    spec codes them) and actions, then ``spiking_config`` or ``sigmoid_config``; ``overrides`` set
-    any other field."""
-    spec = as_spec(spec)
+    """A ``NEATConfig`` for the controller of ``spec`` (a spec, or its name ``"snn"`` / ``"sigmoid"``,
+    which stands for the task's default spec, ``as_spec``) on ``task`` (an ``evolution.Task``): its
+    inputs and outputs from the task's observations (as the spec codes them) and actions, the
+    defaults that learn on plants in general (``evolution.defaults.TASK_GA``: a hidden layer of 16
+    from the start, sparse per-gene weight steps, ...), then ``spiking_config`` or
+    ``sigmoid_config``; ``overrides`` set any other field."""
+    spec = as_spec(spec, task)
     make = sigmoid_config if isinstance(spec, SigmoidSpec) else spiking_config
-    return make(network_inputs(task, spec), task.action_size, **overrides)
+    fields = {**TASK_GA, **overrides}
+    if "initial_hidden" not in overrides:  # a smaller max_hidden asked for caps the start's hidden layer
+        fields["initial_hidden"] = min(fields["initial_hidden"], fields["max_hidden"])
+    return make(network_inputs(task, spec), task.action_size, **fields)
 
 
 def network_inputs(task, spec: SpikingSpec | SigmoidSpec | None) -> int:
@@ -285,7 +154,7 @@ def check_controller_config(config: NEATConfig, task, spec: SpikingSpec | Sigmoi
     actions, or, for sigmoid NEAT, a decoder gain sigma that varies and counts in the
     compatibility distance (a sigmoid controller has no gain, so it would split species over a
     gene with no effect)."""
-    spec = as_spec(spec)
+    spec = as_spec(spec, task)
     inputs = network_inputs(task, spec)
     if config.num_inputs != inputs or config.num_outputs != task.action_size:
         coded = "" if inputs == task.observation_size else f" (coded as {inputs} inputs)"
@@ -444,7 +313,7 @@ class SpikingController(_Phenotype):
     def for_task(cls, genomes: Genomes, config: NEATConfig, task, spec: SpikingSpec, *,
                  backend: str = "auto") -> SpikingController:
         """The controller of ``genomes`` for ``task``'s observations, actions and control period."""
-        return cls(genomes, config, spec, period_s=task.control_period_s, action_max=task.action_max,
+        return cls(genomes, config, spec, period_s=spec.period_s(task.control_period_s), action_max=task.action_max,
                    observation_size=task.observation_size, action_size=task.action_size, backend=backend)
 
     def initial_state(self, network: Tensor) -> SpikingState:
@@ -636,5 +505,5 @@ def make_controller(genomes: Genomes, config: NEATConfig, task, spec: SpikingSpe
     type (``CONTROLLERS``): a ``SpikingController`` for a ``SpikingSpec``, a ``SigmoidController``
     for a ``SigmoidSpec``; a name (``"snn"``, ``"sigmoid"``) means its spec's defaults, None
     ``SpikingSpec()`` (``as_spec``)."""
-    spec = as_spec(spec)
+    spec = as_spec(spec, task)
     return CONTROLLERS[type(spec)].for_task(genomes, config, task, spec, backend=backend)

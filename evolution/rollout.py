@@ -29,6 +29,7 @@ import torch
 from torch import Tensor
 
 from evolution.config import NEATConfig
+from evolution.defaults import RANDOM_START_EPISODES, has_random_starts
 from evolution.input_coding import code_observations, coding_constants, input_coding_of
 from evolution.kernels.episodes import native_rollout
 from evolution.kernels.native_plant import native_plant
@@ -283,24 +284,29 @@ class TaskFitness:
         task: the task; config: the NEAT config (inputs = observations, outputs = actions;
             ``task_config`` makes one), checked against the task and the controller here.
         spec: the controller: a ``SpikingSpec`` (NEAT-SNN) or ``SigmoidSpec`` (sigmoid NEAT), or
-            the name of one with its defaults (``"snn"``, the default, or ``"sigmoid"``;
-            ``evolution.phenotype.as_spec``).
-        episodes, seed, starts, max_steps: as ``rollout``; backend: the spiking network's.
+            the name of one (``"snn"``, the default, or ``"sigmoid"``) for the task's default spec
+            (``evolution.defaults.default_spec``).
+        episodes: episodes per genome; None (default): 16 fresh ones each generation on a task
+            whose starts are random (``evolution.defaults.has_random_starts``), else 1.
+        seed, starts, max_steps: as ``rollout``; backend: the spiking network's.
         fresh_starts: draw new start states each generation (``fresh_starts``: seeded by ``seed``
             and each run's population, so a resumed run sees the same ones) instead of the same
-            ``episodes`` starts for every generation. Use it for a plant with random starts,
-            where fixed starts let the champions learn those starts; leave it off where the
-            starts are the task (the paper's cart-poles) or for a fitness that is a pure
-            function of the genome.
+            ``episodes`` starts for every generation. None (default): on with the default episodes
+            on a task whose starts are random, so the champions cannot learn a fixed few starts;
+            off where the starts are the task (the paper's cart-poles), given, or ``episodes`` is.
     """
 
     def __init__(self, task: Task, config: NEATConfig, spec: SpikingSpec | SigmoidSpec | str | None = None, *,
-                 episodes: int = 1, seed: int = 0, starts=None, max_steps: int | None = None, backend: str = "auto",
-                 fresh_starts: bool = False) -> None:
-        self.task, self.config, self.spec = task.validate(), config, as_spec(spec)
+                 episodes: int | None = None, seed: int = 0, starts=None, max_steps: int | None = None,
+                 backend: str = "auto", fresh_starts: bool | None = None) -> None:
+        self.task, self.config, self.spec = task.validate(), config, as_spec(spec, task)
         check_controller_config(config, task, self.spec)
         if fresh_starts and starts is not None:
             raise ValueError("TaskFitness takes fixed starts= or fresh_starts=True, not both")
+        if episodes is None:  # the defaults: 16 fresh episodes a generation where the starts are random
+            random_starts = starts is None and has_random_starts(task)
+            episodes = RANDOM_START_EPISODES if random_starts else 1
+            fresh_starts = random_starts if fresh_starts is None else fresh_starts
         self.episodes, self.seed, self.starts, self.max_steps, self.backend = episodes, seed, starts, max_steps, backend
         self.fresh_starts = bool(fresh_starts)
 

@@ -22,7 +22,9 @@ The champion is the confirmed genome, or, where none was confirmed within the bu
 the held-out episodes among the final generation's 20 fittest and the run's best-ever genome (a
 champion picked on noisy training fitness alone tests worse). It is then tested on
 ``--test-episodes`` fresh seeded episodes (a seed of its own): ``test_mean`` and ``test_worst``;
-``test_reaches`` says whether the test mean meets the threshold.
+``test_reaches`` says whether the test mean meets the threshold. This logic is
+``tasks.studies.threshold_runs``, which ``snn-neat evolve ENV`` runs too (there with the
+library's defaults, not this study's settings).
 
 Writes ``OUT/results.json`` (settings, every run with its best training fitness per generation,
 a summary per environment and controller), ``OUT/runs.csv`` (one row per run), ``OUT/summary.md``
@@ -42,158 +44,111 @@ import shlex
 import statistics
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import torch
 
 from evolution import (
     NEAT,
-    Genomes,
+    BaseReporter,
     SigmoidSpec,
     SpikingSpec,
     TaskFitness,
-    make_controller,
-    rollout,
     task_config,
 )
 from evolution.checkpoint import atomic_write_bytes
-from tasks.gym_adapter import GymTask
-from tasks.studies.registry import ga_overrides
+from evolution.defaults import RANDOM_START_EPISODES, TASK_GA, default_spec
+from evolution.reporters import GenerationStatus
+from tasks.studies.env_task import gym_task
+from tasks.studies.threshold_runs import (
+    CONFIRM_CANDIDATES,
+    FINAL_CANDIDATES,
+    TEST_SEED,
+    VALIDATION_EPISODES,
+    VALIDATION_SEED,
+    evolve_to_threshold,
+)
 
 __all__ = ["ENVIRONMENTS", "CONTROLLERS", "EnvSetting", "controller_spec", "make_task", "evolve_run", "main"]
 
 
 @dataclass(frozen=True)
 class EnvSetting:
-    """One environment's study settings: gymnasium's reward ``threshold``, the generation budget,
-    training episodes per genome per generation, and ``GymTask`` options."""
+    """One environment's study settings: gymnasium's reward ``threshold`` and the generation budget."""
 
     threshold: float
     generations: int
-    episodes: int
-    task_options: dict = field(default_factory=dict)
-    note: str = ""
 
 
-# Generation budgets sized from a pilot (seconds per generation of 150 genomes x 16 episodes on one
-# CPU thread: NEAT-SNN about 6 on Acrobot, 2.3 on Pendulum, under 1 elsewhere; sigmoid NEAT about
-# a tenth) to fit the whole study (50 runs) in well under 30 minutes (docs/classic-control.md).
+# Generation budgets (a run stops once its champion is confirmed). Every other setting is the
+# library's default for the task (evolution.defaults: task_config, TaskFitness, default_spec), as
+# `snn-neat evolve ENV` runs it: 16 fresh episodes per genome per generation, signed inputs, ...
 ENVIRONMENTS: dict[str, EnvSetting] = {
-    "CartPole-v1": EnvSetting(
-        475.0, 50, 16, {"observation_bounds": ((-2.4, -3.0, -0.21, -3.5), (2.4, 3.0, 0.21, 3.5))},
-        "x and theta coded over the termination limits, the velocities over +-3 m/s and +-3.5 rad/s"),
-    "Acrobot-v1": EnvSetting(
-        -100.0, 30, 16, {"control_period_s": 0.05},
-        "NEAT-SNN runs 50 ms of network time per 0.2 s plant step (100 substeps, not 400)"),
-    "MountainCar-v0": EnvSetting(-110.0, 100, 16),
-    "MountainCarContinuous-v0": EnvSetting(90.0, 30, 16),
-    "Pendulum-v1": EnvSetting(-200.0, 50, 16),
+    "CartPole-v1": EnvSetting(475.0, 50),
+    "Acrobot-v1": EnvSetting(-100.0, 50),
+    "MountainCar-v0": EnvSetting(-110.0, 100),
+    "MountainCarContinuous-v0": EnvSetting(90.0, 50),
+    "Pendulum-v1": EnvSetting(-200.0, 100),
 }
 CONTROLLERS = ("snn", "sigmoid")
 SEEDS = (0, 1, 2, 3, 4)
-# the study's GA (the double pole's pick for both controllers, tasks.studies.registry.STUDIES["dpv"].tuned_ga)
-GA = {**ga_overrides("neat-python"), "survival_threshold": 0.1, "max_hidden": 16}
-CONFIRM_CANDIDATES = 5  # genomes reaching the threshold in training checked on the held-out episodes
-FINAL_CANDIDATES = 20  # of the final generation, re-evaluated when no genome was confirmed
-VALIDATION_SEED, TEST_SEED = 20_000_000, 10_000_000  # + the run's seed
 
 
-def controller_spec(controller: str) -> SpikingSpec | SigmoidSpec:
-    """Both controllers code observations signed about the middle of their bounds. NEAT-SNN: rates
-    over one control step (``rate_window_steps=1``), counted from rest (``rest_relative``)."""
-    if controller == "snn":
-        return SpikingSpec(input_coding="signed", rate_window_steps=1, rest_relative=True)
-    if controller == "sigmoid":
-        return SigmoidSpec(input_coding="signed")
-    raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
+def controller_spec(env_id: str, controller: str) -> SpikingSpec | SigmoidSpec:
+    """The library's default spec of ``controller`` for ``env_id``'s task (``default_spec``)."""
+    if controller not in CONTROLLERS:
+        raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
+    return default_spec(make_task(env_id), controller)
 
 
 def make_task(env_id: str):
-    """The torch port of ``env_id`` with the study's options."""
-    return GymTask(env_id, **ENVIRONMENTS[env_id].task_options)
+    """The torch port of ``env_id`` as ``snn-neat evolve ENV`` makes it (``tasks.studies.env_task``)."""
+    return gym_task(env_id)[0]
 
 
-def _cat(a: Genomes, b: Genomes) -> Genomes:
-    return Genomes(**{k: torch.cat([v, getattr(b, k)], 1) for k, v in a.tensors().items()})
+class _Progress(BaseReporter):
+    """Moves the study's progress bar one generation on, showing the best training fitness."""
 
+    def __init__(self, bar) -> None:
+        self.bar = bar
 
-def _returns(task, genomes: Genomes, config, spec, episodes: int, seed: int) -> torch.Tensor:
-    """``[G, episodes]`` returns of the ``[1, G]`` genomes on ``episodes`` episodes seeded by ``seed``."""
-    return rollout(task, make_controller(genomes, config, task, spec), episodes=episodes, seed=seed).returns
+    def end_generation(self, status: GenerationStatus) -> None:
+        self.bar.update(1)
+        self.bar.set_postfix(best=f"{float(status.fitness.max()):.1f}", refresh=False)
 
 
 def evolve_run(env_id: str, controller: str, seed: int, *, generations: int, episodes: int, pop_size: int,
                validation_episodes: int, test_episodes: int, progress=None) -> dict:
-    """One run; returns its record (see the module docstring)."""
+    """One run (``tasks.studies.threshold_runs``: held-out checks at the threshold, the champion's
+    pick and test); returns its record (see the module docstring)."""
     setting = ENVIRONMENTS[env_id]
     threshold = setting.threshold
-    task, spec = make_task(env_id), controller_spec(controller)
-    config = task_config(task, spec, pop_size=pop_size, fitness_threshold=threshold, **GA)
-    fitness = TaskFitness(task, config, spec=spec, episodes=episodes, seed=seed, fresh_starts=True)
+    task = make_task(env_id)
+    config = task_config(task, controller, pop_size=pop_size, fitness_threshold=threshold)
+    if episodes is None:  # the library's default episodes
+        fitness = TaskFitness(task, config, controller, seed=seed)
+        episodes = fitness.episodes
+    else:
+        fitness = TaskFitness(task, config, controller, episodes=episodes, seed=seed, fresh_starts=True)
+    spec = fitness.spec
     neat = NEAT(config, seeds=[seed])
-    validation_seed = VALIDATION_SEED + seed
-    history: list[float] = []
-    train_gen, train_evals, train_wall = -1, 0, 0.0
-    confirmed_gen, champion, champion_validation = -1, None, None
-    evaluations = validation_evaluations = 0
-    last = last_f = None
-    # one tiny rollout first, so the run's wall time does not include loading or compiling kernels
-    rollout(task, make_controller(neat.ask().gather(torch.zeros(1, 1, dtype=torch.long)), config, task, spec),
-            episodes=1, max_steps=2)
-    t0 = time.perf_counter()
-    for gen in range(1, generations + 1):
-        genomes = neat.ask()
-        f = fitness(genomes)  # [1, P]
-        last, last_f = genomes.clone(), f.clone()  # tell() breeds the next generation in place of these
-        evaluations += pop_size * episodes
-        best = float(f.max())
-        history.append(best)
-        solved = torch.zeros_like(f, dtype=torch.bool)
-        if best >= threshold:
-            if train_gen < 0:
-                train_gen, train_evals, train_wall = gen, evaluations, time.perf_counter() - t0
-            k = min(CONFIRM_CANDIDATES, int((f >= threshold).sum()))
-            idx = f[0].topk(k).indices
-            candidates = genomes.gather(idx.unsqueeze(0))
-            val = _returns(task, candidates, config, spec, validation_episodes, validation_seed).mean(1)
-            validation_evaluations += k * validation_episodes
-            passed = val >= threshold
-            if bool(passed.any()):
-                solved[0, idx[passed]] = True
-                pick = int(torch.where(passed, val, -math.inf).argmax())
-                confirmed_gen, champion_validation = gen, float(val[pick])
-                champion = candidates.gather(torch.tensor([[pick]]))
-        neat.tell(f, solved)
-        if progress is not None:
-            progress.update(1)
-            progress.set_postfix(best=f"{best:.1f}", refresh=False)
-        if confirmed_gen > 0:
-            break
-    generations_run = len(history)
-    if progress is not None and generations_run < generations:
-        progress.update(generations - generations_run)
-    if champion is None:  # none confirmed: the best on the held-out episodes of the last fittest and the best-ever
-        top = last_f[0].topk(min(FINAL_CANDIDATES, pop_size)).indices.unsqueeze(0)
-        candidates = _cat(last.gather(top), neat.result().best_genomes)
-        val = _returns(task, candidates, config, spec, validation_episodes, validation_seed).mean(1)
-        validation_evaluations += candidates.pop_size * validation_episodes
-        pick = int(val.argmax())
-        champion, champion_validation = candidates.gather(torch.tensor([[pick]])), float(val[pick])
-    test = _returns(task, champion, config, spec, test_episodes, TEST_SEED + seed)[0]
-    wall = time.perf_counter() - t0
-    if train_gen < 0:
-        train_evals, train_wall = evaluations, wall
-    test_mean = float(test.mean())
+    runs = evolve_to_threshold(neat, fitness, task, spec, threshold, generations, episodes_per_genome=episodes,
+                               validation_episodes=validation_episodes, test_episodes=test_episodes,
+                               reporters=[] if progress is None else [_Progress(progress)])
+    r = runs.records[0]
+    if progress is not None and r.generations < generations:
+        progress.update(generations - r.generations)
+    reached = r.train_generation > 0
     return {"env": env_id, "controller": controller, "seed": seed, "threshold": threshold,
-            "train_generation": train_gen, "evaluations": train_evals, "wall_s": round(train_wall, 2),
-            "confirmed_generation": confirmed_gen, "generations_run": generations_run,
-            "total_evaluations": evaluations, "validation_evaluations": validation_evaluations,
-            "total_wall_s": round(wall, 2), "best_training_fitness": max(history),
-            "champion_validation_mean": champion_validation,
-            "test_mean": test_mean, "test_worst": float(test.min()), "test_reaches": test_mean >= threshold,
-            "champion_hidden": int(champion.num_hidden(config)[0, 0]),
-            "champion_genes": int(champion.num_genes()[0, 0]), "history": history}
+            "train_generation": r.train_generation, "evaluations": r.train_episodes if reached else r.episodes,
+            "wall_s": round(r.train_wall_s if reached else r.wall_s, 2),
+            "confirmed_generation": r.confirmed_generation, "generations_run": r.generations,
+            "total_evaluations": r.episodes, "validation_evaluations": r.validation_episodes,
+            "total_wall_s": round(r.wall_s, 2), "best_training_fitness": max(r.history),
+            "champion_validation_mean": r.champion_validation,
+            "test_mean": r.test_mean, "test_worst": r.test_worst, "test_reaches": r.test_mean >= threshold,
+            "champion_hidden": r.champion_hidden, "champion_genes": r.champion_genes, "history": r.history}
 
 
 def summarize(runs: list[dict]) -> list[dict]:
@@ -349,9 +304,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--generations", type=_positive, default=None,
                    help="generation budget of every run (default: each environment's)")
     p.add_argument("--episodes", type=_positive, default=None,
-                   help="fresh training episodes per genome per generation (default: each environment's)")
+                   help="fresh training episodes per genome per generation (default: the library's, 16)")
     p.add_argument("--pop-size", type=_positive, default=150)
-    p.add_argument("--validation-episodes", type=_positive, default=32)
+    p.add_argument("--validation-episodes", type=_positive, default=VALIDATION_EPISODES)
     p.add_argument("--test-episodes", type=_positive, default=100)
     p.add_argument("--out", default="results/classic_control")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -372,7 +327,7 @@ def main(argv: list[str] | None = None) -> dict:
 
     command = "python -m experiments.classic_control " + shlex.join(sys.argv[1:] if argv is None else argv)
     plan = [(env, controller, seed, args.generations or ENVIRONMENTS[env].generations,
-             args.episodes or ENVIRONMENTS[env].episodes)
+             args.episodes)
             for env in args.envs for controller in args.controllers for seed in args.seeds]
     bar = tqdm(total=sum(p[3] for p in plan), unit="gen", disable=args.quiet, file=sys.stderr)
     runs = []
@@ -389,8 +344,9 @@ def main(argv: list[str] | None = None) -> dict:
         "validation_seed": f"{VALIDATION_SEED} + seed", "test_seed": f"{TEST_SEED} + seed",
         "environments": {env: {**asdict(ENVIRONMENTS[env]),
                                "generations": args.generations or ENVIRONMENTS[env].generations,
-                               "episodes": args.episodes or ENVIRONMENTS[env].episodes} for env in args.envs},
-        "specs": {c: repr(controller_spec(c)) for c in args.controllers}, "ga": GA,
+                               "episodes": args.episodes or RANDOM_START_EPISODES} for env in args.envs},
+        "specs": {f"{env} {c}": repr(controller_spec(env, c)) for env in args.envs for c in args.controllers},
+        "ga": TASK_GA,
         "confirm_candidates": CONFIRM_CANDIDATES, "final_candidates": FINAL_CANDIDATES,
     }
     results = {"date": datetime.date.today().isoformat(), "command": command, "settings": settings,

@@ -27,7 +27,7 @@ from snn_torch.functional.portable_math import sin_cos
 from snn_torch.functional.scalars import scalars
 from tasks.gym_adapter import Bounds, port_options
 
-__all__ = ["PendulumTask", "pendulum_step", "angle_normalize"]
+__all__ = ["PendulumTask", "PendulumNoVelocityTask", "pendulum_step", "angle_normalize"]
 
 _CSRC = Path(__file__).resolve().parent / "csrc"
 MAX_SPEED = 8.0  # rad/s
@@ -106,3 +106,17 @@ class PendulumTask(Task):
         sin, cos = sin_cos(state[:, 0])
         parts = [cos, sin, state[:, 1]] if self.observe_velocity else [cos, sin]
         return torch.stack(parts, -1)
+
+
+class PendulumNoVelocityTask(PendulumTask):
+    """``Pendulum-v1`` observing only cos(theta) and sin(theta): the controller must infer the
+    velocity from how the angle moves (a memory task). Constructible with no arguments, so
+    ``snn-neat evolve tasks.pendulum:PendulumNoVelocityTask`` runs it; its threshold is -400 (a
+    mean return over 100 episodes; with the velocity observed, gymnasium's criterion is -200)."""
+
+    reward_threshold = -400.0
+
+    def __init__(self, *, max_steps: int = 200, g: float = 10.0, control_period_s: float = DT_S,
+                 observation_bounds: Bounds | None = None) -> None:
+        super().__init__(observe_velocity=False, max_steps=max_steps, g=g, control_period_s=control_period_s,
+                         observation_bounds=observation_bounds)

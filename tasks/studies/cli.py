@@ -49,6 +49,16 @@ def _cmd_figures(args: argparse.Namespace) -> int:
     return 0
 
 
+def _finite_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
 def _int_at_least(minimum: int):
     """An argparse type: an integer >= ``minimum``."""
     what = "a positive integer" if minimum == 1 else f"an integer >= {minimum}"
@@ -210,7 +220,55 @@ def _cmd_xor(args: argparse.Namespace) -> int:
     return 0
 
 
+PAPER_TASKS = ("nonmarkov", "markov")
+# options of one mode of `evolve` only: (dest, option, given?)
+_CARTPOLE_ONLY = (("task", "--task", lambda v: v is not None), ("self_loops", "--self-loops", bool),
+                  ("ga", "--ga", lambda v: v is not None), ("verbose", "--verbose", bool),
+                  ("report_every", "--report-every", lambda v: v is not None))
+_ENV_ONLY = (("runs", "--runs", lambda v: v is not None), ("episodes", "--episodes", lambda v: v is not None),
+             ("pop_size", "--pop-size", lambda v: v is not None), ("threshold", "--threshold", lambda v: v is not None),
+             ("ray", "--ray", lambda v: v is not None))
+
+
+def _evolve_mode(args: argparse.Namespace) -> None:
+    """Which ``evolve`` this is: ENV (``args.env``) or the paper's cart-pole (``args.env`` None,
+    ``args.task`` set); options of the other mode, or both budgets, are a ``UsageError``."""
+    if args.env in PAPER_TASKS:  # `snn-neat evolve markov` is `snn-neat evolve --task markov`
+        if args.task is not None and args.task != args.env:
+            raise UsageError(f"ENV {args.env} and --task {args.task} disagree: give one of them")
+        args.task, args.env = args.env, None
+    if args.generations is not None and args.episodes is not None:
+        raise UsageError(f"--generations {args.generations} and --episodes {args.episodes} are two budgets: "
+                         "give one of them")
+    if args.env is None:
+        for dest, option, given in _ENV_ONLY:
+            if given(getattr(args, dest)):
+                raise UsageError(f"{option} needs ENV (a gymnasium id or module:Class); the paper's cart-pole "
+                                 f"(--task) takes no {option}: name ENV, or drop {option}")
+        args.task = args.task or "nonmarkov"
+        args.runs, args.ga = 1, args.ga or "tuned"
+        args.generations = args.generations or 100
+        args.report_every = args.report_every or 1
+        args.checkpoint_every = args.checkpoint_every or 1
+        return
+    for dest, option, given in _CARTPOLE_ONLY:
+        if given(getattr(args, dest)):
+            raise UsageError(f"{option} is for the paper's cart-pole (no ENV); with ENV {args.env} the run uses the "
+                             f"library's defaults: drop {option}")
+    args.runs = args.runs or 1
+
+
+def _evolve_out(env: str | None) -> str:
+    """``evolve``'s default ``--out``: results/evolve, or results/evolve-ENV (ENV made a folder name)."""
+    if env is None or env in PAPER_TASKS:
+        return "results/evolve"
+    return "results/evolve-" + "".join(c if c.isalnum() or c in "-_." else "_" for c in env)
+
+
 def _cmd_evolve(args: argparse.Namespace) -> int:
+    _evolve_mode(args)
+    if args.env is not None:
+        return _cmd_evolve_env(args)
     _prepare(args)
     from tasks.studies.evolve import run_evolve, write_evolve_report
     from tasks.studies.lock import OutputLock
@@ -220,12 +278,44 @@ def _cmd_evolve(args: argparse.Namespace) -> int:
         _clean(out)
         r = run_evolve(args.controller, args.task, args.seed, args.generations, out, resume=args.resume,
                        self_loops=args.self_loops, ga=args.ga, device=args.device, verbose=args.verbose,
-                       report_every=args.report_every, checkpoint_every=args.checkpoint_every)
+                       report_every=args.report_every, checkpoint_every=args.checkpoint_every,
+                       progress=not args.quiet)
         write_evolve_report(r, out)
     solved = r.result.solved_generation[0].item()
     print(f"{args.controller} seed {args.seed}: best fitness {r.result.best_fitness[0].item():.0f} steps; "
           + (f"solved at generation {solved}" if solved > 0 else f"not solved in {args.generations} generations")
           + f"; wrote {out}/statistics.csv and {out}/champion.json")
+    return 0
+
+
+def _cmd_evolve_env(args: argparse.Namespace) -> int:
+    """``snn-neat evolve ENV`` (``tasks.studies.evolve_env``)."""
+    seeds = _check_seeds(args.seed, args.runs)
+    _check_device(args.device)
+    from tasks.studies.evolve_env import EvolvePlan, build, has_local_run, has_shards, run_plan
+    from tasks.studies.evolve_env_report import summary_table, write_report
+    from tasks.studies.lock import OutputLock
+
+    plan = EvolvePlan(env=args.env, controller=args.controller, seeds=tuple(seeds), generations=args.generations,
+                      episodes=args.episodes, pop_size=args.pop_size, threshold=args.threshold, device=args.device,
+                      checkpoint_every=args.checkpoint_every)
+    built = build(plan)  # ENV and the budget checked before any work
+    _check_memory(len(seeds), [built.config])
+    _check_threads(args.threads)
+    _check_out(args.out)
+    command = _command_line(args)
+    with OutputLock(args.out, command):
+        _clean(args.out)
+        if args.resume and not (has_local_run(args.out) or has_shards(args.out)):
+            raise UsageError(f"--resume: --out {args.out!r} holds no checkpoint of `snn-neat evolve` (evolve.ckpt or "
+                             "shards/evolve.json): run without --resume to start")
+        runs = run_plan(plan, args.out, resume=args.resume, ray_address=args.ray, progress=not args.quiet,
+                        built=built)
+        for path in write_report(runs, args.out, command):
+            if path.parent.name != "champions":
+                print(f"wrote {path}")
+    print(f"wrote {len(runs.records)} champion genome(s) to {Path(args.out) / 'champions'}")
+    print(summary_table(runs), end="")
     return 0
 
 
@@ -283,7 +373,8 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 def _command_line(args: argparse.Namespace, *, resume: bool = False) -> str:
     """The command as typed (``args.argv``), with ``--resume`` added if asked."""
     argv = list(args.argv)
-    if args.command == "reproduce" and "--out" not in argv and not any(a.startswith("--out=") for a in argv):
+    named = args.command == "reproduce" or (args.command == "evolve" and getattr(args, "env", None) is not None)
+    if named and "--out" not in argv and not any(a.startswith("--out=") for a in argv):
         argv += ["--out", args.out]  # the default folder, named: a resume must find it
     if resume and "--resume" not in argv:
         argv.append("--resume")
@@ -297,6 +388,8 @@ def _resume_hint(args: argparse.Namespace) -> str:
     out = Path(args.out)
     if args.command == "reproduce":
         kept = bool(_reproduce_checkpoints(args))
+    elif args.command == "evolve":
+        kept = (out / "evolve.ckpt").exists() or (out / "shards" / "evolve.json").exists()
     else:
         kept = (out / ("xor.ckpt" if args.command == "xor" else "evolve.ckpt")).exists()
     if kept:
@@ -349,26 +442,60 @@ def build_parser() -> argparse.ArgumentParser:
     xor.set_defaults(func=_cmd_xor)
 
     evo = sub.add_parser(
-        "evolve", help="evolve one controller on one of the paper's cart-pole tasks",
-        description="Evolve one controller (NEAT-SNN or sigmoid NEAT) on a cart-pole task of Qiu et al.: "
-                    "nonmarkov (Table II: x and theta only, tau 10 ms, start at 3 degrees, success at 5000 steps) "
-                    "or markov (Table I: all four state variables, bang-bang force, tau 20 ms, success at "
-                    "100,000 steps). Writes the per-generation statistics and the champion genome.")
+        "evolve", help="evolve a controller on any plant (a gymnasium id or your own Task), or on the paper's "
+                       "cart-pole",
+        description="Evolve NEAT-SNN or sigmoid NEAT on ENV with the library's defaults (what task_config and "
+                    "TaskFitness make for the task): RUNS seeded runs (seeds SEED..SEED+RUNS-1) in one batch, each "
+                    "stopping when a genome that reached the threshold in training also reaches it on 32 held-out "
+                    "episodes; each run's champion is then tested on 100 fresh episodes. Writes results.json (every "
+                    "setting, per run: generations, training episodes, CPU and wall seconds to the threshold, the test, "
+                    "the learning curve), learning_curve.png and champions/seedS.json, and prints a table. "
+                    "Without ENV (or with ENV nonmarkov or markov): one controller on a cart-pole task of Qiu et al., "
+                    "nonmarkov (Table II: x and theta only, tau 10 ms, start at 3 degrees, success at 5000 steps) or "
+                    "markov (Table I: all four state variables, bang-bang force, tau 20 ms, success at 100,000 "
+                    "steps); writes the per-generation statistics and the champion genome.")
+    evo.add_argument("env", nargs="?", default=None, metavar="ENV",
+                     help="a gymnasium id (CartPole-v1, Acrobot-v1, MountainCar-v0, MountainCarContinuous-v0 and "
+                          "Pendulum-v1 run as batched torch ports; any other through gymnasium; threshold: its "
+                          "reward_threshold) or module:Class, your evolution.Task subclass (made with no arguments, "
+                          "found from the current folder too; threshold: its optional reward_threshold attribute)")
     evo.add_argument("--controller", choices=["snn", "sigmoid"], default="snn", help="controller (default: snn)")
-    evo.add_argument("--task", choices=["nonmarkov", "markov"], default="nonmarkov",
-                     help="task (default: nonmarkov, Table II; markov: Table I)")
-    evo.add_argument("--seed", type=_non_negative_int, default=0, help="run seed (default: 0)")
-    evo.add_argument("--generations", type=_positive_int, default=100, help="budget (default: 100)")
+    evo.add_argument("--seed", type=_non_negative_int, default=0, help="first run's seed (default: 0)")
+    evo.add_argument("--runs", type=_positive_int, default=None,
+                     help="ENV only: runs, seeds SEED..SEED+RUNS-1, evolved as one batch (default: 1)")
+    evo.add_argument("--generations", type=_positive_int, default=None,
+                     help="budget per run in generations (default: 200 with ENV, 100 for the cart-pole)")
+    evo.add_argument("--episodes", type=_positive_int, default=None, metavar="N",
+                     help="ENV only, instead of --generations: budget per run in training episodes (genomes x "
+                          "episodes each, per generation; a run stops before the generation that would spend more)")
+    evo.add_argument("--pop-size", type=_int_at_least(2), default=None,
+                     help="ENV only: genomes per run (default: the library's)")
+    evo.add_argument("--threshold", type=_finite_float, default=None, metavar="X",
+                     help="ENV only: the score that counts as solved (default: ENV's reward_threshold; none: every "
+                          "run spends its budget)")
+    evo.add_argument("--out", default=None, help="output folder (default: results/evolve-ENV, or results/evolve)")
+    evo.add_argument("--resume", action="store_true",
+                     help="continue from the checkpoint in --out (--generations or --episodes may grow)")
+    evo.add_argument("--ray", default=None, metavar="auto|HOST:PORT",
+                     help="ENV only: run the seeds as Ray tasks on this cluster, one shard per cluster CPU ('auto': "
+                          "the one `ray start` started here); OUT must be on a filesystem all its nodes share, and "
+                          "a module:Class importable on every node")
+    evo.add_argument("--quiet", action="store_true", help="no progress bar")
     evo.add_argument("--device", default="cpu", help="torch device (default: cpu)")
-    evo.add_argument("--self-loops", action="store_true",
-                     help="start with an output self-connection (neat-python's full start)")
-    evo.add_argument("--ga", choices=GA_CHOICES, default="tuned",
-                     help="GA settings (default: tuned, the controller's pick for the task; or a preset: "
-                          + ", ".join(GA_CHOICES[1:]) + ")")
-    evo.add_argument("--out", default="results/evolve", help="output folder (default: results/evolve)")
-    evo.add_argument("--verbose", action="store_true", help="a line per generation instead of a progress bar")
-    evo.add_argument("--report-every", type=_positive_int, default=1, help="with --verbose: every N generations")
-    _add_run_options(evo, every=1)
+    evo.add_argument("--checkpoint-every", type=_positive_int, default=None,
+                     help="generations between checkpoints (default: every 30 s and at the end with ENV; 1 for the "
+                          "cart-pole)")
+    evo.add_argument("--threads", type=_positive_int, default=None, help="torch threads (default: torch's)")
+    cart = evo.add_argument_group("the paper's cart-pole (no ENV)")
+    cart.add_argument("--task", choices=list(PAPER_TASKS), default=None,
+                      help="task (default: nonmarkov, Table II; markov: Table I)")
+    cart.add_argument("--self-loops", action="store_true",
+                      help="start with an output self-connection (neat-python's full start)")
+    cart.add_argument("--ga", choices=GA_CHOICES, default=None,
+                      help="GA settings (default: tuned, the controller's pick for the task; or a preset: "
+                           + ", ".join(GA_CHOICES[1:]) + ")")
+    cart.add_argument("--verbose", action="store_true", help="a line per generation instead of a progress bar")
+    cart.add_argument("--report-every", type=_positive_int, default=None, help="with --verbose: every N generations")
     evo.set_defaults(func=_cmd_evolve)
 
     rep = sub.add_parser(
@@ -450,6 +577,8 @@ def main(argv: list[str] | None = None) -> int:
         faulthandler.enable()
     if getattr(args, "command", None) == "reproduce" and args.out is None:
         args.out = f"results/{args.table}"
+    if getattr(args, "command", None) == "evolve" and args.out is None:
+        args.out = _evolve_out(args.env)
     prog = f"snn-neat {args.command}"
     try:
         return args.func(args)
@@ -471,10 +600,12 @@ def _user_error(exc: Exception) -> str | None:
     """The one-line message for an error the user can fix, or None for a bug (its traceback shows)."""
     from evolution.checkpoint import CheckpointError
     from evolution.config import ConfigError
+    from evolution.task import TaskError
+    from tasks.studies.env_task import EnvError
     from tasks.studies.lock import LockError
     from tasks.studies.registry import ReproduceError
 
-    if isinstance(exc, (UsageError, ReproduceError, CheckpointError, ConfigError, LockError)):
+    if isinstance(exc, (UsageError, ReproduceError, CheckpointError, ConfigError, LockError, EnvError, TaskError)):
         return " ".join(str(exc).split("\n"))
     import torch
 

@@ -36,7 +36,7 @@ import socket
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -327,26 +327,6 @@ def run_controllers_on_ray(task_name: str, controllers: Sequence[str], seeds: li
         total = len(refs)
         results: dict[tuple[str, int], ControllerRuns] = {}
         finished: list[Shard] = []
-        # ray.wait/ray.get block for minutes, whatever their timeout, once the cluster's GCS is
-        # gone; wait in a daemon thread and watch the GCS from here.
-        inbox: queue.Queue = queue.Queue()
-
-        def waiter() -> None:
-            pending = list(refs)
-            while pending:
-                try:
-                    done, pending = ray.wait(pending, num_returns=1)
-                except Exception as exc:  # noqa: BLE001 - reported by the main thread
-                    inbox.put((None, None, exc))
-                    return
-                for ref in done:
-                    try:
-                        inbox.put((ref, ray.get(ref), None))
-                    except Exception as exc:  # noqa: BLE001
-                        inbox.put((ref, None, exc))
-
-        threading.Thread(target=waiter, daemon=True, name="snn-neat-ray-wait").start()
-        unreachable_since = None
 
         def failure(why: str) -> ReproduceError:
             names = ", ".join(s.describe(len(layouts[s.controller])) for s in finished) or "none"
@@ -354,32 +334,25 @@ def run_controllers_on_ray(task_name: str, controllers: Sequence[str], seeds: li
                                   f"{out / SHARDS}): {names}. Run the same command with --resume (with or without "
                                   "--ray) to complete the rest from their checkpoints.")
 
-        while len(results) < total:
-            try:
-                ref, value, exc = inbox.get(timeout=1.0)
-            except queue.Empty:
-                if gcs is not None and not _reachable(*gcs):
-                    unreachable_since = unreachable_since or time.monotonic()
-                    if time.monotonic() - unreachable_since > LOST_AFTER_S:
-                        lost = True
-                        raise failure(f"lost the Ray cluster at {gcs[0]}:{gcs[1]} mid-run") from None
-                else:
-                    unreachable_since = None
-                continue
-            if exc is not None:
-                shard = refs.get(ref)
-                cause = getattr(exc, "cause", None)
-                if isinstance(cause, ReproduceError):
-                    raise ReproduceError(f"{shard.describe(len(layouts[shard.controller]))}: {cause}") from None
-                where = f"{shard.describe(len(layouts[shard.controller]))} failed" if shard else "Ray failed"
-                raise failure(f"{where} ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") \
-                    from None
-            shard = refs[ref]
-            results[(shard.controller, shard.index)] = value
-            finished.append(shard)
-            if progress:
-                print(_finished_line(task_name, shard, len(layouts[shard.controller]), value, len(results), total),
-                      file=sys.stderr, flush=True)
+        try:
+            for ref, value, exc in ray_results(refs, gcs):
+                if exc is not None:
+                    shard = refs.get(ref)
+                    cause = getattr(exc, "cause", None)
+                    if isinstance(cause, ReproduceError):
+                        raise ReproduceError(f"{shard.describe(len(layouts[shard.controller]))}: {cause}") from None
+                    where = f"{shard.describe(len(layouts[shard.controller]))} failed" if shard else "Ray failed"
+                    raise failure(f"{where} ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") \
+                        from None
+                shard = refs[ref]
+                results[(shard.controller, shard.index)] = value
+                finished.append(shard)
+                if progress:
+                    print(_finished_line(task_name, shard, len(layouts[shard.controller]), value, len(results), total),
+                          file=sys.stderr, flush=True)
+        except RayClusterLost:
+            lost = True
+            raise failure(f"lost the Ray cluster at {gcs[0]}:{gcs[1]} mid-run") from None
         return {c: merge_runs([results[(c, s.index)] for s in layout]) for c, layout in layouts.items()}
     finally:
         if owned:
@@ -387,6 +360,51 @@ def run_controllers_on_ray(task_name: str, controllers: Sequence[str], seeds: li
                 _abandon_ray()
             else:
                 ray.shutdown()
+
+
+class RayClusterLost(Exception):
+    """The Ray cluster's GCS was unreachable for ``LOST_AFTER_S`` seconds while tasks were pending."""
+
+
+def ray_results(refs, gcs: tuple[str, int] | None) -> Iterator[tuple[object, object, Exception | None]]:
+    """``(ref, value, exception)`` of each of the Ray tasks ``refs`` as it finishes (``exception``
+    None where it returned ``value``), until all have; ``RayClusterLost`` once the cluster's GCS
+    at ``gcs`` (host, port) has been unreachable for ``LOST_AFTER_S`` s. ``ray.wait``/``ray.get``
+    block for minutes, whatever their timeout, once the GCS is gone: they run in a daemon thread,
+    and the GCS is watched from here."""
+    import ray
+
+    inbox: queue.Queue = queue.Queue()
+
+    def waiter() -> None:
+        pending = list(refs)
+        while pending:
+            try:
+                done, pending = ray.wait(pending, num_returns=1)
+            except Exception as exc:  # noqa: BLE001 - reported by the caller
+                inbox.put((None, None, exc))
+                return
+            for ref in done:
+                try:
+                    inbox.put((ref, ray.get(ref), None))
+                except Exception as exc:  # noqa: BLE001
+                    inbox.put((ref, None, exc))
+
+    threading.Thread(target=waiter, daemon=True, name="snn-neat-ray-wait").start()
+    received, unreachable_since = 0, None
+    while received < len(refs):
+        try:
+            item = inbox.get(timeout=1.0)
+        except queue.Empty:
+            if gcs is not None and not _reachable(*gcs):
+                unreachable_since = unreachable_since or time.monotonic()
+                if time.monotonic() - unreachable_since > LOST_AFTER_S:
+                    raise RayClusterLost from None
+            else:
+                unreachable_since = None
+            continue
+        received += 1
+        yield item
 
 
 def run_controller_on_ray(task_name: str, controller: str, seeds: list[int], generations: int,

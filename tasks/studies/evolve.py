@@ -31,10 +31,11 @@ class EvolveResult:
 def run_evolve(controller: str, task: str, seed: int, generations: int, out: str | os.PathLike, *,
                resume: bool = False, self_loops: bool = False, ga: str = "tuned", device: str = "cpu",
                verbose: bool = False, report_every: int = 1, checkpoint_every: int = 1,
-               stop_after: int | None = None) -> EvolveResult:
+               stop_after: int | None = None, progress: bool = True) -> EvolveResult:
     """Evolve ``controller`` (snn or sigmoid) on ``task`` (nonmarkov: Table II; markov: Table I)
-    for up to ``generations`` generations. ``stop_after`` (generations in this call) exists for
-    tests of interruption."""
+    for up to ``generations`` generations, with a line per generation (``verbose``), else a
+    progress bar unless ``progress`` is False. ``stop_after`` (generations in this call) exists
+    for tests of interruption."""
     from tasks.studies.registry import describe_ga, study
 
     s = study("table1" if task == "markov" else "table2")
@@ -47,8 +48,11 @@ def run_evolve(controller: str, task: str, seed: int, generations: int, out: str
     config = neat.config
     stats = neat.add_reporter(StatisticsReporter())
     stats.rows = [dict(row) for row in data.get("statistics", [])]
-    shown = neat.add_reporter(StdOutReporter(every=report_every) if verbose
-                              else TqdmReporter(total=generations, initial=neat.generation))
+    shown = None
+    if verbose:
+        shown = neat.add_reporter(StdOutReporter(every=report_every))
+    elif progress:
+        shown = neat.add_reporter(TqdmReporter(total=generations, initial=neat.generation))
     neat.add_reporter(RunCheckpoint(path, identity, generations, every=checkpoint_every,
                                     records=lambda: {"statistics": stats.rows}, wall_s=float(data.get("wall_s", 0.0))))
     budget = generations - neat.generation

@@ -26,6 +26,7 @@ from evolution import (
     spiking_config,
     task_config,
 )
+from evolution.defaults import TASK_GA, default_spec
 from tests.evolution.test_task_seam import PointMass
 
 # --- item 3: the spec decides; a config made for the other controller is an error ------------------
@@ -67,7 +68,10 @@ def test_the_spec_alone_picks_the_controller():
     by_name = TaskFitness(task, cfg, "sigmoid", episodes=2)
     assert isinstance(by_spec.spec, SigmoidSpec)
     assert torch.equal(by_spec(genomes), by_position(genomes))
-    assert torch.equal(by_name(genomes), TaskFitness(task, cfg, SigmoidSpec(), episodes=2)(genomes))
+    # a name stands for the task's default spec, not the spec type's own defaults
+    assert by_name.spec == default_spec(task, "sigmoid") != SigmoidSpec()
+    assert torch.equal(by_name(genomes), TaskFitness(task, cfg, default_spec(task, "sigmoid"), episodes=2)(genomes))
+    assert not torch.equal(by_name(genomes), TaskFitness(task, cfg, SigmoidSpec(), episodes=2)(genomes))
 
 
 def test_task_config_reads_the_layout_from_the_task():
@@ -76,7 +80,9 @@ def test_task_config_reads_the_layout_from_the_task():
     assert (sig.num_inputs, sig.num_outputs, sig.num_bias, sig.max_hidden) == (2, 1, 1, 5)
     assert sig.compatibility_sigma_coefficient == 0.0 and sig.sigma_mutate_rate == 0.0
     assert task_config(task, SigmoidSpec(), max_hidden=5) == sig
-    assert task_config(task, SpikingSpec()) == spiking_config(2, 1) == task_config(task)
+    assert task_config(task, SpikingSpec()) == spiking_config(2, 1, **TASK_GA) == task_config(task)
+    assert (sig.initial_hidden, task_config(task).initial_hidden) == (5, 16)  # the start's layer fits max_hidden
+    assert task_config(task, max_hidden=20, initial_hidden=3).initial_hidden == 3
     TaskFitness(task, sig, "sigmoid")  # accepted as it is
 
 

@@ -1,0 +1,92 @@
+"""What a task gets by default: the controller spec, NEAT's settings and the fitness episodes.
+
+One set of defaults for every plant; what differs comes from the task itself (its control
+period, observation bounds, action space, whether its starts are random). ``task_config(task,
+"snn" | "sigmoid")``, ``TaskFitness(task, config, "snn" | "sigmoid")``, ``make_controller(...,
+task, "snn" | "sigmoid")`` and ``snn-neat evolve ENV`` all use them. The paper's studies pin
+their own settings explicitly and do not read these.
+
+Why each one (measured on gymnasium's Pendulum-v1, seeds 0-7, docs/your-own-plant.md):
+
+- **Signed input coding** (``input_coding="signed"``): observations in [-1, 1] about the middle of
+  their bounds. A plant's set point is usually the middle of its range (a pole upright, zero
+  velocity); a unit-coded network gets drive from every input there and must learn to cancel it.
+- **NEAT-SNN: rates over one control step, from rest** (``rate_window_steps=1``,
+  ``rest_relative=True``) **and at most ``NETWORK_MS_MAX`` ms of network time per control step**
+  (``network_ms``): a long window averages away the reaction; the background firing is not
+  read as a drive.
+- **Sigmoid NEAT: ``SIGMOID_UPDATES`` network updates per control step**: a recurrent network
+  updated once per step delays a signal one control step per hidden layer; three updates carry
+  an input through two hidden layers within the step. On Pendulum, without it no run of 4 learned
+  the swing-up in 100 generations (-760 to -920); with it (and the rest) 8 of 8 did.
+- **A hidden layer from the start** (``initial_hidden=16``, every input and bias to every hidden
+  node to every output, beside the direct genes): NEAT's minimal start must first discover the
+  hidden units a swing-up needs; 8 hidden nodes solved 3 of 5 seeds, 16 solved 8 of 8.
+- **Sparse weight steps, gene by gene** (``weight_mutate_per_gene``, each gene perturbed with
+  probability 0.1 by N(0, 1), replaced with 0.01): NEAT's default perturbs every weight of a
+  mutated genome and loses a balance once found (neat-python's 0.8 per gene: 0 of 2 seeds;
+  0.3: 1 of 2; 0.1: 3 of 3 at 8 hidden nodes; 0.05: 0 of 3).
+- **Fresh random starts, 16 episodes per genome per generation** where the task's starts are
+  random (``has_random_starts``): fixed starts let the champions learn those starts. A task whose
+  start is fixed (the paper's cart-poles) runs one episode, as before.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from evolution.specs import SigmoidSpec, SpikingSpec
+
+__all__ = ["TASK_GA", "NETWORK_MS_MAX", "SIGMOID_UPDATES", "RANDOM_START_EPISODES", "default_spec",
+           "has_random_starts", "default_episodes"]
+
+# NEATConfig fields task_config sets before the caller's overrides: neat-python 2.0.0's defaults
+# where this NEAT has the knob (the "neat-python" GA preset), the best 10 % as parents, a hidden
+# layer of 16 from the start and sparse per-gene weight steps.
+TASK_GA: dict = dict(
+    weight_max_value=30.0, weight_min_value=-30.0, elitism=2, elitism_min_species_size=1, crossover_prob=1.0,
+    interspecies_crossover_prob=0.0, max_stagnation=20, compatibility_weight_coefficient=0.5,
+    compatibility_normalize_min_genes=1, survival_threshold=0.1,
+    max_hidden=16, initial_hidden=16,
+    weight_mutate_per_gene=True, weight_mutate_rate=0.1, weight_mutate_power=1.0, weight_replace_rate=0.01,
+)
+NETWORK_MS_MAX = 10.0  # ms of network time per control step at most (NEAT-SNN)
+SIGMOID_UPDATES = 3  # sigmoid network updates per control step
+RANDOM_START_EPISODES = 16  # fresh episodes per genome per generation on a task with random starts
+
+
+def default_spec(task, controller: str) -> SpikingSpec | SigmoidSpec:
+    """The spec of ``controller`` (``"snn"`` or ``"sigmoid"``) for ``task``: signed inputs, and
+    NEAT-SNN's rates over one control step of at most ``NETWORK_MS_MAX`` ms of network time,
+    counted from rest; sigmoid NEAT's ``SIGMOID_UPDATES`` updates per step (module docstring)."""
+    if controller == "sigmoid":
+        return SigmoidSpec(input_coding="signed", updates_per_step=SIGMOID_UPDATES)
+    if controller != "snn":
+        raise ValueError(f"controller must be 'snn' or 'sigmoid', got {controller!r}")
+    base = SpikingSpec()
+    period_ms = float(task.control_period_s) * 1000.0
+    network_ms = None
+    if period_ms > NETWORK_MS_MAX:
+        network_ms = NETWORK_MS_MAX
+    elif abs(round(period_ms / base.dt_ms) * base.dt_ms - period_ms) > 1e-9:
+        # a period that is no whole number of substeps runs the whole substeps within it
+        network_ms = max(1, math.floor(period_ms / base.dt_ms + 1e-9)) * base.dt_ms
+    return SpikingSpec(input_coding="signed", rate_window_steps=1, rest_relative=True, network_ms=network_ms)
+
+
+def has_random_starts(task) -> bool:
+    """Whether ``task.reset`` draws its start states from the generator (two generators with
+    different seeds give different starts)."""
+    a = task.reset(2, torch.Generator().manual_seed(1))
+    b = task.reset(2, torch.Generator().manual_seed(2))
+    parts_a = a if isinstance(a, tuple) else (a,)
+    parts_b = b if isinstance(b, tuple) else (b,)
+    return any(not torch.equal(x, y) for x, y in zip(parts_a, parts_b, strict=True))
+
+
+def default_episodes(task) -> int:
+    """Episodes per genome per generation: ``RANDOM_START_EPISODES`` fresh ones where the task's
+    starts are random, else 1."""
+    return RANDOM_START_EPISODES if has_random_starts(task) else 1
