@@ -3,32 +3,19 @@
 One set of defaults for every plant; what differs comes from the task itself (its control
 period, observation bounds, action space, whether its starts are random). ``task_config(task,
 "snn" | "sigmoid")``, ``TaskFitness(task, config, "snn" | "sigmoid")``, ``make_controller(...,
-task, "snn" | "sigmoid")`` and ``snn-neat evolve ENV`` all use them. The paper's studies pin
-their own settings explicitly and do not read these.
+task, "snn" | "sigmoid")`` and ``snn-neat evolve ENV`` all use them; the paper's studies pin
+their own settings and do not read these. docs/your-own-plant.md gives the measurement behind
+each choice:
 
-Why each one (measured on gymnasium's Pendulum-v1, seeds 0-7, docs/your-own-plant.md):
-
-- **Signed input coding** (``input_coding="signed"``): observations in [-1, 1] about the middle of
-  their bounds. A plant's set point is usually the middle of its range (a pole upright, zero
-  velocity); a unit-coded network gets drive from every input there and must learn to cancel it.
-- **NEAT-SNN: rates over one control step, from rest** (``rate_window_steps=1``,
-  ``rest_relative=True``) **and at most ``NETWORK_MS_MAX`` ms of network time per control step**
-  (``network_ms``): a long window averages away the reaction; the background firing is not
-  read as a drive.
-- **Sigmoid NEAT: ``SIGMOID_UPDATES`` network updates per control step**: a recurrent network
-  updated once per step delays a signal one control step per hidden layer; three updates carry
-  an input through two hidden layers within the step. On Pendulum, without it no run of 4 learned
-  the swing-up in 100 generations (-760 to -920); with it (and the rest) 8 of 8 did.
-- **A hidden layer from the start** (``initial_hidden=16``, every input and bias to every hidden
-  node to every output, beside the direct genes): NEAT's minimal start must first discover the
-  hidden units a swing-up needs; 8 hidden nodes solved 3 of 5 seeds, 16 solved 8 of 8.
-- **Sparse weight steps, gene by gene** (``weight_mutate_per_gene``, each gene perturbed with
-  probability 0.1 by N(0, 1), replaced with 0.01): NEAT's default perturbs every weight of a
-  mutated genome and loses a balance once found (neat-python's 0.8 per gene: 0 of 2 seeds;
-  0.3: 1 of 2; 0.1: 3 of 3 at 8 hidden nodes; 0.05: 0 of 3).
-- **Fresh random starts, 16 episodes per genome per generation** where the task's starts are
-  random (``has_random_starts``): fixed starts let the champions learn those starts. A task whose
-  start is fixed (the paper's cart-poles) runs one episode, as before.
+- signed input coding (each observation in [-1, 1] about the middle of its bounds);
+- NEAT-SNN: at most ``NETWORK_MS_MAX`` ms of network time per control step, rates over the last
+  ``RATE_WINDOW_STEPS`` control steps, counted from each neuron's rate at rest;
+- sigmoid NEAT: ``SIGMOID_UPDATES`` network updates per control step, so an input crosses two
+  hidden layers within the step instead of one layer per step;
+- ``TASK_GA``: a hidden layer of 16 from the start, sparse per-gene weight steps, and
+  neat-python's settings where this NEAT has the knob;
+- ``RANDOM_START_EPISODES`` fresh episodes per genome per generation where the task's starts
+  are random (``has_random_starts``), one where they are fixed.
 """
 
 from __future__ import annotations
@@ -39,7 +26,7 @@ import torch
 
 from evolution.specs import SigmoidSpec, SpikingSpec
 
-__all__ = ["TASK_GA", "NETWORK_MS_MAX", "SIGMOID_UPDATES", "RANDOM_START_EPISODES", "default_spec",
+__all__ = ["TASK_GA", "NETWORK_MS_MAX", "RATE_WINDOW_STEPS", "SIGMOID_UPDATES", "RANDOM_START_EPISODES", "default_spec",
            "has_random_starts", "default_episodes"]
 
 # NEATConfig fields task_config sets before the caller's overrides: neat-python 2.0.0's defaults
@@ -53,6 +40,7 @@ TASK_GA: dict = dict(
     weight_mutate_per_gene=True, weight_mutate_rate=0.1, weight_mutate_power=1.0, weight_replace_rate=0.01,
 )
 NETWORK_MS_MAX = 10.0  # ms of network time per control step at most (NEAT-SNN)
+RATE_WINDOW_STEPS = 3  # control steps in NEAT-SNN's rate window
 SIGMOID_UPDATES = 3  # sigmoid network updates per control step
 RANDOM_START_EPISODES = 16  # fresh episodes per genome per generation on a task with random starts
 
@@ -73,7 +61,8 @@ def default_spec(task, controller: str) -> SpikingSpec | SigmoidSpec:
     elif abs(round(period_ms / base.dt_ms) * base.dt_ms - period_ms) > 1e-9:
         # a period that is no whole number of substeps runs the whole substeps within it
         network_ms = max(1, math.floor(period_ms / base.dt_ms + 1e-9)) * base.dt_ms
-    return SpikingSpec(input_coding="signed", rate_window_steps=1, rest_relative=True, network_ms=network_ms)
+    return SpikingSpec(input_coding="signed", rate_window_steps=RATE_WINDOW_STEPS, rest_relative=True,
+                       network_ms=network_ms)
 
 
 def has_random_starts(task) -> bool:

@@ -120,7 +120,10 @@ def genome_from_dict(data: dict, config: NEATConfig, *, where: str = "<dict>",
             raise _fail(where, f"connection {i}->{j} leads into an input or bias node")
         conn[i, j], enabled[i, j], weight[i, j] = True, entry["enabled"], w
     sigma = _number(data.get("sigma"), where, "sigma")
-    if not config.sigma_min_value <= sigma <= config.sigma_max_value:
+    # a float32 genome clamped to a bound holds the bound rounded to float32, which may lie just outside it
+    lo, hi = config.sigma_min_value, config.sigma_max_value
+    lo32, hi32 = (float(torch.tensor(v, dtype=torch.float32)) for v in (lo, hi))
+    if not min(lo, lo32) <= sigma <= max(hi, hi32):
         raise _fail(where, f"sigma {sigma!r} lies outside the config's [{config.sigma_min_value}, "
                            f"{config.sigma_max_value}] (sigma_min_value, sigma_max_value)")
     fitness = data.get("fitness")

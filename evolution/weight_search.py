@@ -129,7 +129,7 @@ class FixedTopologyProblem(Problem):
             raise ValueError(f"config must be a NEATConfig, got {type(config).__name__}")
         if controller is not None and controller not in CONTROLLERS:
             raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
-        spec = as_spec(controller if spec is None else spec)
+        spec = as_spec(controller if spec is None else spec, task)
         if controller is not None and spec_name(spec) != controller:
             raise ValueError(f"controller {controller!r} disagrees with spec {type(spec).__name__}: pass one of them")
         controller = spec_name(spec)

@@ -35,7 +35,7 @@ from torch import Tensor
 
 from evolution.ablation import StaticMapController
 from evolution.config import NEATConfig
-from evolution.phenotype import SigmoidSpec, SpikingSpec, make_controller
+from evolution.phenotype import SigmoidSpec, SpikingSpec, as_spec, make_controller
 from evolution.population import Genomes
 from evolution.rollout import rollout
 from evolution.task import Task
@@ -179,7 +179,8 @@ def balanced_steps(genomes: Genomes, config: NEATConfig, spec: SpikingSpec | Sig
         starts = task.reset(1, None, device=genomes.device)
     else:
         starts = task.starts(starts.to(device=genomes.device, dtype=torch.float64))
-    controller = make_controller(genomes, config, task, spec)
+    # a name is its spec type's own defaults here (the study's), not the double pole's library defaults
+    controller = make_controller(genomes, config, task, as_spec(spec))
     if static_map_steps is not None:
         controller = StaticMapController(controller, static_map_steps)
     return steps_balanced(task, controller, starts).view(genomes.num_runs, genomes.pop_size, -1)

@@ -165,3 +165,19 @@ def test_spiking_phenotype_equals_the_snn_torch_layer():
     _, _, more = controller.act(obs01, state)
     _, _, again = controller.act(obs01, controller.initial_state(rows))
     assert torch.equal(again, counts) and not torch.equal(more, counts)
+
+
+def test_a_float32_sigma_clamped_to_its_bound_loads_again(tmp_path):
+    # float32(1e-5) is 9.99999975e-06, below the float64 bound: a genome clamped there (as weight
+    # search clamps) must still load; a value beyond the float32-rounded bound must not
+    from dataclasses import replace as _replace
+
+    cfg = _replace(small_config(), sigma_min_value=1e-5)
+    g, _ = population(cfg)
+    g.sigma[0, 0] = torch.tensor(1e-5, dtype=torch.float32)
+    assert float(g.sigma[0, 0]) < 1e-5
+    back = load_genome(save_genome(tmp_path / "edge.json", g, cfg), cfg)
+    assert torch.equal(back.sigma[0, 0], g.sigma[0, 0])
+    g.sigma[0, 0] = 9e-6
+    with pytest.raises(CheckpointError, match="sigma_min_value"):
+        load_genome(save_genome(tmp_path / "below.json", g, cfg), cfg)

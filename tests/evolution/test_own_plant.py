@@ -218,31 +218,38 @@ def test_the_docs_pendulum_example_evolves_and_its_random_genomes_run():
     assert namespace["steps"].shape == (64, 2) and int(namespace["steps"].min()) >= 1
 
 
-def test_the_docs_swing_up_settings_run_as_written():
-    """docs/writing-a-task.md's Pendulum-v1 settings (2 generations instead of 400): the config,
-    spec and task they name are the ones that run, and the champions are tested on 50 starts."""
-    block = next(b for b in _doc_blocks("python") if "PendulumTask(control_period_s=0.01)" in b)
-    small = block.replace("generations=400", "generations=2").replace("print(", "(")
+def _python_block(path: Path, marker: str) -> str:
+    text = path.read_text()
+    return next(b.split("```")[0] for b in text.split("```python\n")[1:] if marker in b)
+
+
+def test_your_own_plants_python_runs_the_defaults_as_written():
+    """docs/your-own-plant.md's Python (2 generations instead of 100): the library's defaults for
+    the task, nothing set but the plant, the controller and a budget."""
+    root = Path(__file__).resolve().parents[2]
+    block = _python_block(root / "docs" / "your-own-plant.md", 'GymTask("Pendulum-v1")')
+    small = block.replace("generations=100", "generations=2")
     assert small.count("generations=2") == 1
     namespace: dict = {}
     exec(small, namespace)
-    config, spec, task = namespace["config"], namespace["spec"], namespace["task"]
-    assert config.weight_mutate_per_gene and config.node_add_prob == 0.2 and config.num_bias == 0
-    assert spec.rate_window_steps == 1 and spec.rest_relative and spec.input_coding == "signed"
-    assert task.control_period_s == 0.01 and task.observe_velocity
-    assert namespace["fitness"].fresh_starts and namespace["fitness"].episodes == 16
-    assert namespace["test"].returns.shape == (2, 50) and bool((namespace["test"].returns < 0).all())
+    task, config, fitness = namespace["task"], namespace["config"], namespace["fitness"]
+    assert fitness.spec == default_spec(task, "sigmoid") and fitness.spec.updates_per_step == 3
+    assert all(getattr(config, k) == v for k, v in TASK_GA.items())
+    assert fitness.fresh_starts and fitness.episodes == 16
+    assert namespace["result"].best_fitness.shape == (5,)
 
 
 def test_the_readmes_quick_start_on_your_own_plant_runs():
-    text = (Path(__file__).resolve().parents[2] / "README.md").read_text()
-    block = next(b.split("```")[0] for b in text.split("```python\n")[1:] if "class Pendulum(Task)" in b)
-    small = block.replace("generations=10", "generations=2")
+    root = Path(__file__).resolve().parents[2]
+    block = _python_block(root / "README.md", 'GymTask("Pendulum-v1")')
+    small = block.replace("generations=100", "generations=2")
     assert small != block
     namespace: dict = {}
     exec(small, namespace)
     assert namespace["result"].best_fitness.shape == (4,)
-    assert namespace["config"].num_inputs == 2 and isinstance(namespace["fitness"].spec, SpikingSpec)
+    task, fitness = namespace["task"], namespace["fitness"]
+    assert namespace["config"].num_inputs == 3 and fitness.spec == default_spec(task, "snn")
+    assert fitness.spec.input_coding == "signed" and fitness.fresh_starts
 
 
 def test_the_docs_own_controller_example_runs_through_the_seam():

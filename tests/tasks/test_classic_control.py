@@ -22,7 +22,15 @@ import numpy as np
 import pytest
 import torch
 
-from evolution import SigmoidSpec, SpikingSpec, make_controller, random_genomes, rollout, task_config
+from evolution import (
+    SigmoidSpec,
+    SpikingSpec,
+    make_controller,
+    random_genomes,
+    rollout,
+    sigmoid_config,
+    task_config,
+)
 from evolution.kernels.episodes import native_rollout
 from evolution.kernels.native_plant import native_plant
 from evolution.task import TaskError
@@ -401,7 +409,8 @@ def test_a_controllers_episodes_on_the_port_are_its_episodes_through_the_adapter
         env.reset(seed=int(seed))
         port_starts.append(_port_row(port, _gym_state(env), True)[0])
     env.close()
-    cfg = task_config(port, "sigmoid", pop_size=4, weight_init_stdev=3.0)
+    # NEAT's own config (not the library's task defaults): the networks these tolerances were measured on
+    cfg = sigmoid_config(port.observation_size, port.action_size, pop_size=4, weight_init_stdev=3.0)
     genomes = random_genomes(cfg, hidden=3, density=0.8, seed=0, dtype=torch.float64)
     on_port = rollout(port, make_controller(genomes, cfg, port, SigmoidSpec()), episodes=2,
                       starts=torch.stack(port_starts), record=True)

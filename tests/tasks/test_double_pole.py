@@ -6,6 +6,7 @@ import pytest
 import torch
 
 from evolution import NEAT, TaskFitness, spiking_config
+from evolution.phenotype import SpikingSpec
 from tasks.double_pole import DoublePoleParams, DoublePoleTask, double_pole_failed, double_pole_step
 
 # ESP / NEAT 2002's constants, written out again here on purpose (not imported).
@@ -217,7 +218,7 @@ def test_generalization_grid_and_the_champion_test():
         assert sorted(set(grid[:, k].tolist())) == pytest.approx([a * v for v in (-0.9, -0.5, 0.0, 0.5, 0.9)])
     cfg = spiking_config(num_inputs=3, num_outputs=1, pop_size=16, max_hidden=4)
     neat = NEAT(cfg, seeds=[3, 4])
-    neat.run(TaskFitness(DoublePoleTask.without_velocities(), cfg, "snn"), 3)
+    neat.run(TaskFitness(DoublePoleTask.without_velocities(), cfg, SpikingSpec()), 3)  # the study functions read "snn" so
     genomes = neat.ask()
     steps = balanced_steps(genomes, cfg, max_steps=60)[..., 0]  # [R, P] from the standard start
     alone = balanced_steps(genomes.select_runs([1]), cfg, max_steps=60)[0, :, 0]
