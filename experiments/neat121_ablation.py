@@ -22,7 +22,7 @@ import torch
 from evolution.neat import NEAT
 from experiments.sensitivity import seed_range
 from tasks.studies.double_pole_report import neat121_counts
-from tasks.studies.registry import STUDIES
+from tasks.studies.registry import STUDIES, StudyOptions
 from tasks.studies.results import mann_whitney
 
 __all__ = ["ABLATIONS", "run_setting"]
@@ -60,12 +60,14 @@ def run_setting(variant: str, controller: str, seeds: list[int], generations: in
     """One setting's runs: solved generation and NEAT 1.2.1's evaluation count per run."""
     study = STUDIES[variant]
     ga = f"neat-1.2.1-{variant}" if ga == "neat-1.2.1" else ga
-    config = study.config(controller, ga=ga, coding=coding, **overrides)
+    # the study's own fitness and test of a solution, with NEAT 1.2.1's test of a generation on DPNV
+    options = StudyOptions(setup="neat-2002", ga=ga, coding=coding,
+                           champion_test="species" if variant == "dpnv" else None)
+    config = study.config(controller, options, **overrides)
     neat = NEAT(config, seeds=seeds)
     start = time.process_time()
-    neat.run(study.fitness(controller, config, coding), generations,
-             solved_fn=study.solved(controller, config, coding, champion_test="species" if variant == "dpnv" else None,
-                                       neat=neat))
+    neat.run(study.fitness(controller, config, options), generations,
+             solved_fn=study.solved(controller, config, options, neat=neat))
     P = config.pop_size
     evals = neat121_counts(P, neat.solved_generation.tolist(), neat.solved_position.tolist())
     return {"solved": sum(e is not None for e in evals), "runs": len(seeds), "evaluations": evals,

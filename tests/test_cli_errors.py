@@ -315,12 +315,14 @@ def test_running_out_of_memory_is_one_line(error, capsys, tmp_path, monkeypatch)
 @pytest.mark.parametrize("table, controller", [("dpnv", "snn"), ("dpnv", "sigmoid"), ("dpv", "sigmoid"),
                                                ("table1", "snn"), ("table2", "sigmoid")])
 def test_the_memory_check_sizes_the_configs_the_study_evolves(table, controller):
-    """The check reads the config run_controller evolves: DPNV's population of 1000, not Table II's 150."""
+    """The check reads the config run_controller evolves: the default setup's population (DPNV's best:
+    NEAT-SNN 100, sigmoid NEAT 300), not Table II's 150."""
     from tasks.studies.cli import _configs, build_parser
     from tasks.studies.reproduce import study_config
 
     args = build_parser().parse_args(["reproduce", table, "--controllers", controller])
     [config] = _configs(args)
     assert config == study_config(table, controller)
-    assert config.pop_size == {"dpnv": 1000}.get(table, 150)
-    assert config.num_inputs == {"dpnv": 3, "dpv": 6, "table1": 4, "table2": 2}[table]
+    assert config.pop_size == {("dpnv", "snn"): 100, ("dpnv", "sigmoid"): 300}.get((table, controller), 150)
+    push_pull = 2 if (table, controller) == ("dpnv", "snn") else 1  # NEAT-SNN's best DPNV setup: two inputs a variable
+    assert config.num_inputs == {"dpnv": 3, "dpv": 6, "table1": 4, "table2": 2}[table] * push_pull

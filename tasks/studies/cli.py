@@ -8,6 +8,7 @@ import os
 import shlex
 import sys
 import time
+from dataclasses import fields
 from pathlib import Path
 
 # OpenMP threads (torch's and the C kernels') sleep at a barrier instead of spinning: on a busy
@@ -18,11 +19,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 # The studies, their GA presets, codings and champion tests: the registry imports no torch, so
 # --help needs none.
-from tasks.studies.registry import GA_CHOICES, STUDIES  # noqa: E402
-
-CODINGS = tuple(dict.fromkeys(c for s in STUDIES.values() for c in s.codings))
-CHAMPION_TESTS = tuple(dict.fromkeys(t for s in STUDIES.values() for t in s.champion_tests))
-FITNESSES = tuple(dict.fromkeys(f for s in STUDIES.values() for f in s.fitnesses))
+from tasks.studies.registry import GA_CHOICES, STUDIES, StudyOptions  # noqa: E402
 
 
 def _positive_float(text: str) -> float:
@@ -176,20 +173,22 @@ def _check_memory(runs: int, configs: list) -> None:
                          f"machine's {total / 1e9:,.0f} GB: use fewer --runs")
 
 
+def _study_options(args: argparse.Namespace) -> StudyOptions:
+    """The ``StudyOptions`` a ``reproduce`` command line gives (None: the setup's)."""
+    return StudyOptions(**{f.name: getattr(args, f.name) for f in fields(StudyOptions)})
+
+
 def _configs(args: argparse.Namespace) -> list:
     """The NEAT configs a command will evolve (for the memory check)."""
     if args.command == "xor":
         from tasks.studies.xor import XOR_CONFIG
 
         return [XOR_CONFIG]
-    table = args.table if args.command == "reproduce" else ("table1" if args.task == "markov" else "table2")
-    controllers = args.controllers if args.command == "reproduce" else [args.controller]
-    coding = getattr(args, "coding", "study")
     if args.command == "reproduce":  # options the study does not offer stop here, before any work
-        for c in controllers:
-            STUDIES[table].check(c, coding, args.champion_test, args.fitness_starts, args.fitness)
-        STUDIES[table].min_general(args.min_general)
-    return [STUDIES[table].config(c, self_loops=args.self_loops, ga=args.ga, coding=coding) for c in controllers]
+        s, options = STUDIES[args.table], _study_options(args)
+        return [s.config(c, options) for c in args.controllers]
+    table = "table1" if args.task == "markov" else "table2"
+    return [STUDIES[table].config(args.controller, self_loops=args.self_loops, ga=args.ga)]
 
 
 def _prepare(args: argparse.Namespace) -> list[int]:
@@ -344,24 +343,26 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 
     command = _command_line(args)
     results = {}
-    common = dict(resume=args.resume, self_loops=args.self_loops, ga=args.ga, checkpoint_every=args.checkpoint_every,
-                  device=args.device, progress=not args.quiet, coding=args.coding, champion_test=args.champion_test,
-                  fitness_starts=args.fitness_starts, fitness=args.fitness, min_general=args.min_general)
+    s, options = STUDIES[args.table], _study_options(args)
+    budget = {c: s.generations(s.config(c, options), generations=args.generations, evaluations=args.evaluations)
+              for c in args.controllers}
+    common = dict(options=options, resume=args.resume, checkpoint_every=args.checkpoint_every, device=args.device,
+                  progress=not args.quiet)
     with OutputLock(args.out, command):
         _clean(args.out)
         if args.resume and not _reproduce_checkpoints(args):
             raise UsageError(f"--resume: --out {args.out!r} holds no checkpoint of this reproduction "
                              f"({', '.join(c + '.ckpt' for c in args.controllers)}): run without --resume to start")
         if args.ray is not None:
-            results = run_controllers_on_ray(args.table, args.controllers, seeds, args.generations, args.out,
+            results = run_controllers_on_ray(args.table, args.controllers, seeds, budget, args.out,
                                              address=args.ray, shards=args.shards, **common)
         else:
             for c in args.controllers:
                 if args.shards is not None or has_shards(args.out, c):  # the shard layout of a (Ray) run
-                    results[c] = run_controller_sharded(args.table, c, seeds, args.generations, args.out,
+                    results[c] = run_controller_sharded(args.table, c, seeds, budget[c], args.out,
                                                         shards=args.shards, **common)
                 else:
-                    results[c] = run_controller(args.table, c, seeds, args.generations, args.out, **common)
+                    results[c] = run_controller(args.table, c, seeds, budget[c], args.out, **common)
         for path in write_report(results, args.table, args.out, command=command,
                                  generalization=not args.no_generalization):
             if path.suffix != ".json" or path.parent.name != "champions":
@@ -411,6 +412,21 @@ def _add_run_options(p: argparse.ArgumentParser, *, every: int | None) -> None:
                    help="generations between checkpoints (default: "
                         + ("every 30 s, and at the end)" if every is None else f"{every})"))
     p.add_argument("--threads", type=_positive_int, default=None, help="torch threads (default: torch's)")
+
+
+def _add_study_options(p: argparse.ArgumentParser) -> None:
+    """A flag per ``StudyOptions`` field (``--setup``, ``--ga``, ...), each None unless given, so the
+    setup's value holds where the command line says nothing."""
+    for f in fields(StudyOptions):
+        meta, flag = f.metadata, "--" + f.name.replace("_", "-")
+        if meta["kind"] == "flag":
+            p.add_argument(flag, action="store_true", default=None, help=meta["help"])
+            continue
+        kw: dict = {"metavar": meta["metavar"]} if meta["metavar"] else {}
+        if meta["offered"]:
+            kw["choices"] = tuple(dict.fromkeys(c for s in STUDIES.values() for c in getattr(s, meta["offered"])))
+        kind = {"str": str, "int": int, "count": _positive_int}[meta["kind"]]
+        p.add_argument(flag, type=kind, default=None, help=meta["help"], **kw)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -513,42 +529,16 @@ def build_parser() -> argparse.ArgumentParser:
                      "or beyond the paper, double-pole balancing with (dpv) or without (dpnv) velocities")
     rep.add_argument("--runs", type=_positive_int, default=60, help="runs per controller (default: 60, the paper's)")
     rep.add_argument("--seed", type=_non_negative_int, default=0, help="first seed (default: 0)")
-    rep.add_argument("--generations", type=_positive_int, default=100, help="budget per run (default: 100)")
+    budget = rep.add_mutually_exclusive_group()
+    budget.add_argument("--generations", type=_positive_int, default=None,
+                        help="budget per run in generations (default: the study's: 100 for the tables)")
+    budget.add_argument("--evaluations", type=_positive_int, default=None, metavar="N",
+                        help="budget per run in evaluations (genomes evaluated, as NEAT counts them; each controller "
+                             "runs N // its population generations; default for dpv 15,000 and dpnv 100,000, NEAT C++ "
+                             "1.2.1's 100 generations of 150 and of 1000)")
     rep.add_argument("--controllers", type=_controllers, default=["snn", "sigmoid"],
                      help="comma-separated subset of snn,sigmoid (default: both)")
-    rep.add_argument("--self-loops", action="store_true",
-                     help="start genomes with an output self-connection (sensitivity check; the paper has none)")
-    rep.add_argument("--ga", choices=GA_CHOICES, default="tuned",
-                     help="GA settings: 'tuned' (default), each controller's own pick for the table, made on tuning "
-                          "seeds; or one preset for both: neat-c++ (NEAT 2002 / NEAT C++), neat-python (its defaults), "
-                          "neat-1.2.1-dpv or neat-1.2.1-dpnv (NEAT C++ 1.2.1's double-pole parameter files, their "
-                          "populations included), neat-1.2.1-dpnv-per-gene (p2nv.ne with population 300 and "
-                          "per-gene weight steps: the DPNV pick), neat-1.2.1-dpnv-snn (the same with population 100: "
-                          "NEAT-SNN's DPNV pick)")
-    rep.add_argument("--coding", choices=CODINGS, default=CODINGS[0],
-                     help="how observations reach the networks: 'study' (default: the paper's, or the double-pole "
-                          "study's: [0, 1] over the bounds) or 'signed' (double pole: NEAT C++ 1.2.1's x/4.8, x_dot/2, "
-                          "theta/0.52, theta_dot/2, centred and unclipped; tables: [-1, 1] over the paper's bounds, "
-                          "push-pull pairs for Bernoulli inputs; a sensitivity study) or 'push-pull' (double pole: "
-                          "NEAT C++ 1.2.1's values on two input nodes per variable, the positive and the negative "
-                          "part; NEAT-SNN at 300 nA per unit: the coding with which it solves DPNV)")
-    rep.add_argument("--champion-test", choices=CHAMPION_TESTS, default=None,
-                     help="dpnv only: the test of a generation: NEAT C++ 1.2.1's champion of the best species not "
-                          "tested since its last record (the best when all were; 'species', the default), or each run's overall champion, "
-                          "every generation ('champion', the default before 2026-12-03)")
-    rep.add_argument("--fitness-starts", type=_positive_int, default=1, metavar="K",
-                     help="dpnv only: the damping fitness averaged over K episodes, from the standard start and K-1 "
-                          "fixed random starts within Gruau's ranges (default 1: NEAT 2002's fitness; 64, with --min-general "
-                          "250, gave solutions that hold 314 of the 625 starts; one evaluation is then K episodes)")
-    rep.add_argument("--fitness", choices=FITNESSES, default=FITNESSES[0],
-                     help="dpnv only: the fitness evolved on: 'study' (default: Gruau's damping fitness, whose damping "
-                          "term sums x, x_dot, theta1 and theta1_dot) or 'damping-both-poles' (the short pole's angle "
-                          "and angular velocity in the damping term too: NEAT-SNN's controllers then stop ringing "
-                          "the short pole)")
-    rep.add_argument("--min-general", type=int, default=None, metavar="N",
-                     help="dpnv only: the generalisation starts (of 625) a solution must hold for 1000 steps besides "
-                          "the 100,000-step balance (default 200, NEAT 2002's test; more asks for more general "
-                          "solutions and costs evaluations)")
+    _add_study_options(rep)
     rep.add_argument("--out", default=None, help="output folder (default: results/TABLE)")
     rep.add_argument("--resume", action="store_true", help="continue from the checkpoints in --out (--generations may change the budget of the unsolved runs, to one they have not passed)")
     rep.add_argument("--checkpoint-every", type=_positive_int, default=1, help="generations between checkpoints")

@@ -36,15 +36,15 @@ import socket
 import sys
 import threading
 import time
-from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import torch
 
 from evolution.checkpoint import atomic_write_bytes
 from evolution.population import Genomes
-from tasks.studies.registry import ReproduceError
+from tasks.studies.registry import ReproduceError, StudyOptions
 from tasks.studies.reproduce import run_controller
 from tasks.studies.results import ControllerRuns
 
@@ -105,11 +105,9 @@ def merge_runs(parts: Sequence[ControllerRuns]) -> ControllerRuns:
                                  f"and {p.controller!r} ({p.generations} generations)")
     champions = Genomes(**{name: torch.cat([getattr(p.champions, name) for p in parts])
                            for name in first.champions.tensors()})
+    option_keys = ("setup", *StudyOptions.identity_defaults())
     extra = {"complete": all(p.extra.get("complete", True) for p in parts), "shards": len(parts),
-             "ga": first.extra.get("ga", ""), "coding": first.extra.get("coding", "study"),
-             "champion_test": first.extra.get("champion_test", "champion"),
-             "fitness_starts": first.extra.get("fitness_starts", 1), "fitness": first.extra.get("fitness", "study"),
-             "min_general": first.extra.get("min_general"),
+             **{k: first.extra[k] for k in option_keys if k in first.extra},
              "solved_position": [q for p in parts for q in p.extra.get("solved_position", [-1] * len(p.seeds))]}
     for key in ("cpu_s", "solve_test_cpu_s"):  # a shard without the figure (an old checkpoint) leaves it unknown
         if all(key in p.extra for p in parts):
@@ -161,10 +159,8 @@ def shard_layout(out: str | os.PathLike, controller: str, seeds: Sequence[int], 
     return [Shard(controller, k, s, out / SHARDS / f"{controller}-{k}") for k, s in enumerate(split)]
 
 
-def _run_shard(task_name: str, shard: Shard, generations: int, self_loops: bool, checkpoint_every: int,
-               device: str, threads: int | None, ga: str = "tuned", coding: str = "study",
-               champion_test: str | None = None, fitness_starts: int = 1, fitness: str = "study",
-               min_general: int | None = None) -> ControllerRuns:
+def _run_shard(task_name: str, shard: Shard, generations: int | None, *, options: StudyOptions | None = None,
+               checkpoint_every: int = 1, device: str = "cpu", threads: int | None = None) -> ControllerRuns:
     """Run (or continue) one shard; what a Ray task runs, and what the local path runs."""
     if threads is not None:
         torch.set_num_threads(threads)
@@ -173,10 +169,8 @@ def _run_shard(task_name: str, shard: Shard, generations: int, self_loops: bool,
     atomic_write_bytes(shard.folder / "worker.json", json.dumps(info).encode())
     # Always resume: the manifest guards against overwriting a finished reproduction, and a
     # retried task must continue from the checkpoint its killed predecessor left.
-    return run_controller(task_name, shard.controller, shard.seeds, generations, shard.folder, resume=True,
-                          self_loops=self_loops, ga=ga, checkpoint_every=checkpoint_every, device=device,
-                          progress=False, coding=coding, champion_test=champion_test, fitness_starts=fitness_starts,
-                          fitness=fitness, min_general=min_general)
+    return run_controller(task_name, shard.controller, shard.seeds, generations, shard.folder, options=options,
+                          resume=True, checkpoint_every=checkpoint_every, device=device, progress=False)
 
 
 def _finished_line(task_name: str, shard: Shard, count: int, r: ControllerRuns, done: int, total: int) -> str:
@@ -185,20 +179,19 @@ def _finished_line(task_name: str, shard: Shard, count: int, r: ControllerRuns, 
             f"{r.wall_s:.1f} s [{done}/{total} shards]")
 
 
-def run_controller_sharded(task_name: str, controller: str, seeds: list[int], generations: int,
-                           out: str | os.PathLike, *, resume: bool = False, shards: int | None = None,
-                           self_loops: bool = False, ga: str = "tuned", checkpoint_every: int = 1,
+def run_controller_sharded(task_name: str, controller: str, seeds: list[int], generations: int | None,
+                           out: str | os.PathLike, *, options: StudyOptions | None = None, resume: bool = False,
+                           shards: int | None = None, checkpoint_every: int = 1,
                            device: str | torch.device = "cpu", progress: bool = True,
-                           coding: str = "study", champion_test: str | None = None,
-                           fitness_starts: int = 1, fitness: str = "study",
-                           min_general: int | None = None) -> ControllerRuns:
+                           **option_fields) -> ControllerRuns:
     """Like :func:`run_controller`, but shard by shard in this process, following the
     manifest in ``OUT/shards`` (how ``--resume`` without ``--ray`` completes a Ray run)."""
+    options = replace(options or StudyOptions(), **option_fields)
     layout = shard_layout(out, controller, seeds, shards, resume=resume)
     parts = []
     for shard in layout:
-        parts.append(_run_shard(task_name, shard, generations, self_loops, checkpoint_every, str(device), None, ga,
-                                coding, champion_test, fitness_starts, fitness, min_general))
+        parts.append(_run_shard(task_name, shard, generations, options=options, checkpoint_every=checkpoint_every,
+                                device=str(device)))
         if progress:
             print(_finished_line(task_name, shard, len(layout), parts[-1], len(parts), len(layout)), file=sys.stderr)
     return merge_runs(parts)
@@ -274,13 +267,11 @@ def _abandon_ray() -> None:
     atexit.unregister(ray.shutdown)
 
 
-def run_controllers_on_ray(task_name: str, controllers: Sequence[str], seeds: list[int], generations: int,
-                           out: str | os.PathLike, *, address: str, shards: int | None = None,
-                           resume: bool = False, self_loops: bool = False, ga: str = "tuned", checkpoint_every: int = 1,
-                           device: str = "cpu", progress: bool = True, max_retries: int = 3,
-                           cpus_per_shard: int = 1, coding: str = "study",
-                           champion_test: str | None = None, fitness_starts: int = 1,
-                           fitness: str = "study", min_general: int | None = None) -> dict[str, ControllerRuns]:
+def run_controllers_on_ray(task_name: str, controllers: Sequence[str], seeds: list[int],
+                           generations: int | Mapping[str, int] | None, out: str | os.PathLike, *, address: str,
+                           options: StudyOptions | None = None, shards: int | None = None, resume: bool = False,
+                           checkpoint_every: int = 1, device: str = "cpu", progress: bool = True,
+                           max_retries: int = 3, cpus_per_shard: int = 1, **option_fields) -> dict[str, ControllerRuns]:
     """Evolve ``seeds`` of every controller as Ray tasks on the cluster at ``address``
     (``"auto"`` or ``"HOST:PORT"``), one task per shard, all controllers' shards in flight
     together; returns each controller's merged results, equal to :func:`run_controller`'s.
@@ -298,6 +289,8 @@ def run_controllers_on_ray(task_name: str, controllers: Sequence[str], seeds: li
     import ray.exceptions
 
     out = Path(out)
+    options = replace(options or StudyOptions(), **option_fields)
+    budget = generations if isinstance(generations, Mapping) else {c: generations for c in controllers}
     if max_retries < 1:
         raise ReproduceError(f"max_retries must be >= 1, got {max_retries}")
     if ray.is_initialized():
@@ -321,9 +314,9 @@ def run_controllers_on_ray(task_name: str, controllers: Sequence[str], seeds: li
         refs = {}
         for layout in layouts.values():
             for shard in layout:
-                refs[remote.remote(task_name, shard, generations, self_loops, checkpoint_every, str(device),
-                                   cpus_per_shard, ga, coding, champion_test, fitness_starts, fitness,
-                                   min_general)] = shard
+                refs[remote.remote(task_name, shard, budget[shard.controller], options=options,
+                                   checkpoint_every=checkpoint_every, device=str(device),
+                                   threads=cpus_per_shard)] = shard
         total = len(refs)
         results: dict[tuple[str, int], ControllerRuns] = {}
         finished: list[Shard] = []

@@ -94,6 +94,8 @@ def study_rows(results: dict[str, ControllerRuns], variant: str, *, generalizati
                "report_tests_cpu_s": report_tests_cpu_s,
                "evaluations_neat121_mean_solved": _mean(neat121_solved),
                "evaluations_neat121_median_solved": statistics.median(neat121_solved) if neat121_solved else math.nan}
+        if r.extra.get("setup") is not None:
+            row["setup"] = r.extra["setup"]
         if r.extra.get("coding", "study") != "study":
             row["coding"] = r.extra["coding"]
         if r.extra.get("champion_test", "champion") != "champion":
@@ -166,7 +168,15 @@ def format_study_markdown(summary: dict, command: str) -> str:
         lines.append(f"| {p['method']} | {p['source']} | {_fmt(p.get('population'))} | {_fmt(p.get('evaluations'))} | "
                      f"| | | {p.get('failures', '')} | {p.get('generalization', '-')} | {_fmt(p.get('neat121_mean'))} | "
                      f"{_fmt(p.get('neat121_median'))} |")
-    budget = next(iter(summary["rows"].values()))["generations"]
+    lines += ["", "Setup of each controller (`--setup`; an option given on the command line overrides the setup's):", "",
+              "| Controller | Setup | GA | Coding | Test of a generation | Fitness starts | Fitness | Test of a solution "
+              "(of 625 starts) | Budget |", "|---|---|---|---|---|---|---|---|---|"]
+    for c, row in summary["rows"].items():
+        held = row.get("min_general", GENERALIZATION_PASS) if variant == "dpnv" else "-"
+        lines.append(f"| {LABELS.get(c, c)} | {row.get('setup', '-')} | {row['ga']} | {row.get('coding', 'study')} | "
+                     f"{row.get('champion_test', 'champion')} | {row.get('fitness_starts', 1)} | "
+                     f"{row.get('fitness', 'study')} | {held} | {row['generations']:,} generations of "
+                     f"{row['population']:,} ({row['generations'] * row['population']:,} evaluations) |")
     if any(row.get("champion_test") == "species" for row in summary["rows"].values()):
         lines += ["", "Test of a generation: NEAT C++ 1.2.1's, the champion of the best species not tested since its "
                   "last record (the best species when all were), one per run and generation (`--champion-test species`)."]
@@ -194,10 +204,10 @@ def format_study_markdown(summary: dict, command: str) -> str:
     for coding, text in codings.items():
         if any(row.get("coding") == coding for row in summary["rows"].values()):
             lines += ["", f"Input coding: {text} (`--coding {coding}`)."]
-    lines += ["", f"Evaluations = generations x population, as NEAT 2002 counts them (the champion tests are not "
-              f"counted); NEAT C++ 1.2.1 counts population x (generation - 1) + the position of the first solving "
-              f"genome in its generation. A run that does not solve within {budget} generations is a failure; the mean over all "
-              f"runs (failures as {budget + 1} generations) is in summary.json."]
+    lines += ["", "Evaluations = generations x population, as NEAT 2002 counts them (the champion tests are not "
+              "counted); NEAT C++ 1.2.1 counts population x (generation - 1) + the position of the first solving "
+              "genome in its generation. A run that does not solve within its budget (the table above) is a failure; the "
+              "mean over all runs (failures as the budget + 1 generations) is in summary.json."]
     if "mann_whitney_u" in summary:
         mw = summary["mann_whitney_u"]
         lines.append(f"Mann-Whitney U (two-sided, evaluations, NEAT-SNN vs sigmoid NEAT, failures as budget + 1): "

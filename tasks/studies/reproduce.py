@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import torch
@@ -26,26 +27,23 @@ from evolution.checkpoint import CheckpointError
 from evolution.config import NEATConfig
 from evolution.neat import NEAT
 from evolution.reporters import BaseReporter, GenerationStatus, TqdmReporter
-from tasks.studies.registry import STUDIES, ReproduceError, describe_ga, study
+from tasks.studies.registry import STUDIES, ReproduceError, StudyOptions, study
 from tasks.studies.results import ControllerRuns
 from tasks.studies.resumable import RunCheckpoint, open_run
 
-__all__ = ["TASKS", "ReproduceError", "ControllerRuns", "run_controller", "study_config", "write_report",
+__all__ = ["TASKS", "ReproduceError", "ControllerRuns", "StudyOptions", "run_controller", "study_config", "write_report",
            "FIG8_MAX_PAD"]
 
 TASKS = tuple(STUDIES)
-IDENTITY_DEFAULTS = {"coding": "study", "champion_test": "champion", "fitness_starts": 1, "fitness": "study",
-                     "min_general": None}  # checkpoints from before the key: this value
 # Fig. 8 draws solved runs' final best up to the budget, or this many generations where the
 # budget is larger (evolution itself may go on longer; its generations are all drawn).
 FIG8_MAX_PAD = 10_000
 
 
-def study_config(task_name: str, controller: str, *, self_loops: bool = False, ga: str = "tuned",
-                 coding: str = "study") -> NEATConfig:
-    """The NEAT config ``run_controller`` evolves ``controller`` with on ``task_name``
+def study_config(task_name: str, controller: str, options: StudyOptions | None = None, **option_fields) -> NEATConfig:
+    """The NEAT config ``run_controller`` evolves ``controller`` with on ``task_name`` under ``options``
     (``STUDIES[task_name].config``; the CLI's memory check reads it too)."""
-    return study(task_name).config(controller, self_loops=self_loops, ga=ga, coding=coding)
+    return study(task_name).config(controller, _options(options, option_fields))
 
 
 def write_report(results: dict[str, ControllerRuns], table: str, out: str | os.PathLike, *, command: str,
@@ -99,52 +97,59 @@ def _checked_history(path: Path, data: dict, neat: NEAT) -> list[Tensor]:
     return list(history.unbind(0))
 
 
-def run_controller(task_name: str, controller: str, seeds: list[int], generations: int, out: str | os.PathLike,
-                   *, resume: bool = False, self_loops: bool = False, ga: str = "tuned", checkpoint_every: int = 1,
-                   device: str | torch.device = "cpu", progress: bool = True,
-                   stop_after: int | None = None, coding: str = "study",
-                   champion_test: str | None = None, fitness_starts: int = 1,
-                   fitness: str = "study", min_general: int | None = None) -> ControllerRuns:
+def _options(options: StudyOptions | None, fields: dict) -> StudyOptions:
+    """``options`` with the ``StudyOptions`` fields given as keywords set on it."""
+    return replace(options or StudyOptions(), **fields)
+
+
+def run_controller(task_name: str, controller: str, seeds: list[int], generations: int | None,
+                   out: str | os.PathLike, *, options: StudyOptions | None = None, resume: bool = False,
+                   checkpoint_every: int = 1, device: str | torch.device = "cpu", progress: bool = True,
+                   stop_after: int | None = None, **option_fields) -> ControllerRuns:
     """Evolve ``controller`` on the study ``task_name`` (``STUDIES``) for each seed (one batch),
     checkpointing to ``out``.
 
+    ``options`` (``StudyOptions``; its fields may also be given as keywords, e.g. ``coding="signed"``):
+    the setup (default: the study's first, for the double pole each controller's best) and any field
+    of it overridden: the GA (a preset of ``GA_PRESETS``, or ``"tuned"``, the controller's own pick),
+    the input coding, the test of a generation (DPNV: ``"species"``, NEAT C++ 1.2.1's champion of the
+    best species not tested since its last record, its checks and records kept in the checkpoint, or
+    ``"champion"``, each run's overall champion every generation), the fitness starts (DPNV: the mean
+    damping fitness from the standard start and ``fitness_starts - 1`` fixed random starts,
+    ``tasks.studies.double_pole.damping_fitness_starts``), the fitness and the generalisation starts a
+    solution holds (``min_general``, DPNV).
+    ``generations``: the budget (None: the study's, ``Study.generations``).
+
     ``resume`` continues from ``OUT/<controller>.ckpt`` (which must have been written with
-    the same task, seeds, budget and start genome); without it an existing checkpoint is an
-    error, so a finished reproduction is never overwritten by accident. ``ga``: a GA preset of
-    ``tasks.studies.registry.GA_PRESETS``, or ``"tuned"`` (default), the controller's own
-    pick for the study. ``coding``: the study's input coding (``"study"``, or ``"signed"``).
-    ``champion_test``: the test of a generation the study offers (default: its first; DPNV:
-    ``"species"``, NEAT C++ 1.2.1's champion of the best species not tested since its last record
-    (the best species when all were), its checks and records kept in the checkpoint, or ``"champion"``, each run's overall champion every
-    generation).
-    ``fitness_starts``: episodes per evaluation where the study offers it (DPNV: the mean damping
-    fitness from the standard start and ``fitness_starts - 1`` fixed random starts,
-    ``tasks.studies.double_pole.damping_fitness_starts``); 1, the default, is the study's own.
-    ``fitness``: one of the study's ``fitnesses`` (``"study"``, its own, the default; DPNV also
-    ``"damping-both-poles"``).
-    ``min_general``: the generalisation starts (of 625) a solution holds, where the study's test
-    counts them (DPNV; None: its own, NEAT 2002's 200).
+    the same task, seeds, resolved options and start genome; the budget may grow); without it an
+    existing checkpoint is an error, so a finished reproduction is never overwritten by accident.
     ``stop_after`` (generations in this call) exists for tests of interruption.
     """
     s = study(task_name)
-    champion_test = s.check(controller, coding, champion_test, fitness_starts, fitness)
-    min_general = s.min_general(min_general)
-    preset, ga_extra = s.ga_choice(controller, ga)
+    options = s.options(controller, _options(options, option_fields))
     if checkpoint_every < 1:
         raise ReproduceError(f"checkpoint_every must be >= 1, got {checkpoint_every}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"{controller}.ckpt"
-    ga_text = describe_ga(preset, ga_extra)
+    recorded = s.identity(controller, options)
+    config = s.config(controller, options)
+    if generations is None:
+        generations = s.generations(config)
     identity = {"task": task_name, "controller": controller, "seeds": list(seeds), "generations": generations,
-                "self_loops": self_loops, "ga": ga_text, "coding": coding, "champion_test": champion_test,
-                "fitness_starts": fitness_starts, "fitness": fitness, "min_general": min_general}
-    neat, data = open_run(path, identity, resume=resume, device=device, missing_ok=True, defaults=IDENTITY_DEFAULTS,
-                          fresh=lambda: NEAT(s.config(controller, self_loops=self_loops, ga=ga, coding=coding),
-                                             seeds=seeds, device=device))
+                **recorded}
+    try:
+        neat, data = open_run(path, identity, resume=resume, device=device, missing_ok=True,
+                              defaults=StudyOptions.identity_defaults(),
+                              fresh=lambda: NEAT(config, seeds=seeds, device=device))
+    except ReproduceError as exc:
+        if "was written with" not in str(exc) or len(s.setups) == 1:
+            raise
+        raise ReproduceError(f"{exc}: this call's options are those of setup {options.setup!r}; a checkpoint "
+                             "written before setups existed resumes with setup 'neat-2002' (--setup neat-2002)") from None
     config = neat.config
-    fitness_fn = s.fitness(controller, config, coding, fitness_starts, fitness)
-    solved_fn = s.solved(controller, config, coding, champion_test=champion_test, neat=neat, min_general=min_general)
+    fitness_fn = s.fitness(controller, config, options)
+    solved_fn = s.solved(controller, config, options, neat=neat)
     if data.get("solved_state") is not None and hasattr(solved_fn, "load_state_dict"):
         try:
             solved_fn.load_state_dict(data["solved_state"])
@@ -181,9 +186,7 @@ def run_controller(task_name: str, controller: str, seeds: list[int], generation
                           solved_generation=neat.solved_generation.cpu().tolist(),
                           best_fitness=neat.best_fitness.cpu().tolist(), history=hist,
                           champions=neat.best_genomes.to("cpu"), config=config, wall_s=checkpoint.wall_s,
-                          extra={"complete": checkpoint.finished(neat), "ga": ga_text, "coding": coding,
-                                 "champion_test": champion_test, "fitness_starts": fitness_starts, "fitness": fitness,
-                                 "min_general": min_general,
+                          extra={"complete": checkpoint.finished(neat), **recorded, "setup": options.setup,
                                  "cpu_s": cpu_before + time.process_time() - cpu_start,
                                  "solve_test_cpu_s": 0.0 if timed is None else timed.cpu_s,
                                  "solved_position": neat.solved_position.cpu().tolist()})

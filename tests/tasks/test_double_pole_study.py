@@ -144,7 +144,7 @@ def test_reproduce_with_the_signed_coding_records_it_and_resumes_only_with_it(tm
     again = run_controller("dpv", "sigmoid", [0, 1], 3, tmp_path / "again", progress=False, coding="signed")
     assert again.history[:2].equal(r.history)  # the same runs, one generation further
     with pytest.raises(ReproduceError, match=r"written with coding='signed', this call asks for coding='study'"):
-        run_controller("dpv", "sigmoid", [0, 1], 2, out, progress=False, resume=True)
+        run_controller("dpv", "sigmoid", [0, 1], 2, out, progress=False, resume=True, setup="neat-2002")
     write_study_report({"sigmoid": r}, "dpv", out, command="test", generalization=False)
     md = (out / "dpv.md").read_text()
     assert "Input coding: signed, as NEAT C++ 1.2.1 feeds its networks" in md and "4.8, 2, 0.52, 2, 0.52, 2" in md
@@ -305,7 +305,7 @@ def test_a_fitness_over_k_starts_is_the_mean_of_each_starts_damping_fitness():
 
 def test_reproduce_dpnv_with_fitness_starts_records_them_and_resumes_only_with_them(tmp_path):
     out = tmp_path / "k2"
-    kw = dict(progress=False, ga="neat-1.2.1-dpnv-per-gene", coding="signed")
+    kw = dict(progress=False, setup="neat-2002", ga="neat-1.2.1-dpnv-per-gene", coding="signed")
     r = run_controller("dpnv", "sigmoid", [0, 1], 2, out, fitness_starts=2, **kw)
     one = run_controller("dpnv", "sigmoid", [0, 1], 2, tmp_path / "k1", **kw)
     assert r.extra["fitness_starts"] == 2 and one.extra["fitness_starts"] == 1
@@ -368,7 +368,7 @@ def test_min_general_is_the_generalisation_starts_a_dpnv_solution_must_hold(monk
 
 
 def test_reproduce_dpnv_with_min_general_records_it_and_resumes_only_with_it(tmp_path):
-    kw = dict(progress=False, ga="neat-1.2.1-dpnv-per-gene", coding="signed")
+    kw = dict(progress=False, setup="neat-2002", ga="neat-1.2.1-dpnv-per-gene", coding="signed")
     out = tmp_path / "m300"
     r = run_controller("dpnv", "sigmoid", [0], 1, out, min_general=300, **kw)
     assert r.extra["min_general"] == 300
@@ -421,7 +421,7 @@ def test_the_both_poles_fitness_is_the_damping_fitness_that_sees_the_short_pole(
 
 def test_reproduce_dpnv_with_the_both_poles_fitness_records_it_and_resumes_only_with_it(tmp_path):
     out = tmp_path / "both"
-    kw = dict(progress=False, ga="neat-1.2.1-dpnv-per-gene", coding="signed")
+    kw = dict(progress=False, setup="neat-2002", ga="neat-1.2.1-dpnv-per-gene", coding="signed")
     r = run_controller("dpnv", "sigmoid", [0, 1], 8, out, fitness="damping-both-poles", **kw)
     own = run_controller("dpnv", "sigmoid", [0, 1], 8, tmp_path / "own", **kw)
     assert r.extra["fitness"] == "damping-both-poles" and own.extra["fitness"] == "study"
