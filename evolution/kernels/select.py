@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor
@@ -33,10 +32,8 @@ from torch import Tensor
 from evolution.config import NEATConfig
 from evolution.population import Genomes
 from evolution.rng import RunRNG
+from evolution.species_state import SpeciesState
 from snn_torch.kernels.build import KernelLibrary, load_library
-
-if TYPE_CHECKING:
-    from evolution.speciate import SpeciesState
 
 __all__ = ["kernel_available", "select_parents", "species_offspring", "species_state_offspring", "choose_representatives",
            "SELECTION_DRAWS"]
