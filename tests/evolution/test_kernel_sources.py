@@ -54,11 +54,17 @@ def test_a_library_exports_exactly_what_its_header_declares(module):
 
 
 # Each Python mirror of a kernel's parameter struct, and the header and name of the C struct.
+TEST_CSRC = Path(kernel_tests.__file__).resolve().parents[1] / "csrc"
 STRUCTS = [
-    (select_kernel.SelectParams, "select.h", "select_params"),
-    (select_kernel.SelectParentsIO, "select.h", "select_parents_io"),
-    (select_kernel.OffspringIO, "select.h", "offspring_io"),
-    (select_kernel.RepsIO, "select.h", "reps_io"),
+    (select_kernel.SelectParams, CSRC / "select.h", "select_params"),
+    (select_kernel.SelectParentsIO, CSRC / "select.h", "select_parents_io"),
+    (select_kernel.OffspringIO, CSRC / "select.h", "offspring_io"),
+    (select_kernel.RepsIO, CSRC / "select.h", "reps_io"),
+    (breed_kernel.BreedParams, CSRC / "breed.h", "breed_params"),
+    (breed_kernel.GeneSet, CSRC / "breed.h", "gene_set"),
+    (breed_kernel.BreedIO, CSRC / "breed.h", "breed_io"),
+    (breed_kernel.AssignIO, CSRC / "breed.h", "assign_io"),
+    (kernel_tests.DistancesIO, TEST_CSRC / "kernel_entry_points.h", "distances_io"),
 ]
 
 
@@ -70,12 +76,12 @@ def _ctype(t: object) -> tuple:
 @pytest.mark.parametrize(("cls", "header", "c_name"), STRUCTS, ids=[c for _, _, c in STRUCTS])
 def test_a_python_struct_mirrors_its_c_struct(cls, header, c_name):
     # Names, order and types: ctypes lays the fields out as the C compiler does only if they agree.
-    c_fields = parse_structs((CSRC / header).read_text())[c_name]
+    c_fields = parse_structs(header.read_text())[c_name]
     assert [(n, _ctype(t)) for n, t in cls._fields_] == [(n, _ctype(t)) for n, t in c_fields]
 
 
 def test_every_struct_of_the_headers_has_a_mirror():
-    declared = {(h, name) for h in ("select.h",) for name in parse_structs((CSRC / h).read_text())}
+    declared = {(h, name) for h in {h for _, h, _ in STRUCTS} for name in parse_structs(h.read_text())}
     assert declared == {(h, c) for _, h, c in STRUCTS}
 
 
