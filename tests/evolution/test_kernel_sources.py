@@ -11,6 +11,7 @@ import pytest
 from evolution import rng
 from evolution.config import NEATConfig
 from evolution.kernels import breed as breed_kernel
+from evolution.kernels import episodes as episodes_kernel
 from evolution.kernels import select as select_kernel
 from snn_torch.kernels.build import parse_prototypes, parse_structs
 from tests.evolution import kernel_entry_points as kernel_tests
@@ -64,6 +65,9 @@ STRUCTS = [
     (breed_kernel.GeneSet, CSRC / "breed.h", "gene_set"),
     (breed_kernel.BreedIO, CSRC / "breed.h", "breed_io"),
     (breed_kernel.AssignIO, CSRC / "breed.h", "assign_io"),
+    (episodes_kernel.EpisodesIO, CSRC / "episodes.h", "episodes_io"),
+    (episodes_kernel.SpikingParams, CSRC / "episodes.h", "spiking_params"),
+    (episodes_kernel.SigmoidParams, CSRC / "episodes.h", "sigmoid_params"),
     (kernel_tests.DistancesIO, TEST_CSRC / "kernel_entry_points.h", "distances_io"),
 ]
 
