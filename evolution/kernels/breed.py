@@ -26,11 +26,14 @@ unused ones changes nothing, and the result is the same with any thread count.
 
 The C is ``evolution/kernels/csrc/breed.c`` (exports declared in ``breed.h``; the draws in
 ``counter_rng.h`` and ``box_muller.h``, the distance in ``gene_distance.h``), built once per
-machine by ``snn_torch.kernels.build``; ``SNN_NEAT_C_KERNELS=0`` disables the kernels.
+machine by ``snn_torch.kernels.build``; ``SNN_NEAT_C_KERNELS=0`` disables the kernels. ``breed``
+and ``assign_species`` take structs declared in ``breed.h``: the config's parameters
+(``BreedParams``, built by ``breed_params``), gene sets (``GeneSet``) and their arrays and sizes.
 """
 
 from __future__ import annotations
 
+import ctypes
 import math
 from pathlib import Path
 
@@ -42,10 +45,11 @@ from evolution.kernels import select as select_kernel
 from evolution.neat121 import CLONE_LINK_PROB
 from evolution.population import Genomes
 from evolution.rng import RunRNG
-from snn_torch.kernels.build import KernelLibrary, load_libraries
+from snn_torch.kernels.build import KernelLibrary, KernelStruct, load_libraries
 
 __all__ = ["kernel_available", "usable_for", "wanted", "breed", "breed_blocks", "toggles_one", "GeneBits", "assign_species",
-           "touched_nodes", "found_species", "put_rows"]
+           "touched_nodes", "found_species", "put_rows", "BreedParams", "GeneSet", "BreedIO", "AssignIO",
+           "breed_params", "gene_set"]
 
 # Draw blocks of one breeding step, in the reference's order (the C enum B_* lists them in the
 # same order): (name, "nn" for a [P, N, N] block or "p" for a [P] block, counters per draw).
@@ -84,6 +88,75 @@ def breed_blocks(P: int, N: int, cfg: NEATConfig | None = None) -> tuple[list[in
 _CSRC = Path(__file__).resolve().parent / "csrc"
 LIBRARY = ("neat_breed", _CSRC / "breed.c", _CSRC / "breed.h")  # (name, source, header)
 MAX_NODES = 64  # the feed-forward closure keeps a row of the adjacency in one 64-bit word
+
+
+_i64, _f64, _int, _ptr = ctypes.c_int64, ctypes.c_double, ctypes.c_int, ctypes.c_void_p
+
+
+class BreedParams(KernelStruct):
+    """``breed_params`` of ``breed.h``: what the kernels take from ``NEATConfig``."""
+    _fields_ = [("inherit_disabled", _f64), ("node_add_prob", _f64), ("first_output", _i64),
+                ("first_hidden", _i64), ("feed_forward", _int), ("per_gene", _int), ("conn_add_prob", _f64),
+                ("w_mean", _f64), ("w_stdev", _f64), ("w_min", _f64), ("w_max", _f64), ("w_rate", _f64),
+                ("w_rate_sum", _f64), ("w_replace", _f64), ("w_power", _f64), ("s_rate", _f64), ("s_power", _f64),
+                ("s_min", _f64), ("s_max", _f64), ("toggle_rate", _f64), ("exclusive", _int), ("neatc", _int),
+                ("recur_split", _int), ("one_on", _int), ("one_prob", _f64), ("re_prob", _f64),
+                ("clone_link_prob", _f64), ("conn_tries", _i64), ("w_uniform", _int), ("shared_link", _int),
+                ("split_first_bias", _i64), ("coef", _f64 * 5), ("thr", _f64)]
+
+
+class GeneSet(KernelStruct):
+    """``gene_set`` of ``breed.h``: a ``GeneBits``' arrays (pointers)."""
+    _fields_ = [("bits", _ptr), ("before", _ptr), ("count", _ptr), ("top", _ptr), ("weight", _ptr),
+                ("sigma", _ptr), ("map", _ptr)]
+
+
+class BreedIO(KernelStruct):
+    """``breed_io`` of ``breed.h``: ``breed``'s arrays (pointers) and sizes."""
+    _fields_ = [("pw", _ptr), ("pc", _ptr), ("pe", _ptr), ("pn", _ptr), ("ps", _ptr), ("pm", _ptr), ("a_idx", _ptr),
+                ("b_idx", _ptr), ("do_cross", _ptr), ("active", _ptr), ("cw", _ptr), ("cc", _ptr), ("ce", _ptr),
+                ("cn", _ptr), ("cs", _ptr), ("cm", _ptr), ("src", _ptr), ("dst", _ptr), ("request", _ptr),
+                ("new_node", _ptr), ("granted", _ptr), ("keys", _ptr), ("base", _ptr), ("blocks", _ptr),
+                ("reserved", _ptr), ("dest_runs", _ptr), ("R", _i64), ("P", _i64), ("N", _i64), ("gbits", _ptr),
+                ("gbefore", _ptr), ("gcount", _ptr), ("gtop", _ptr), ("gmap", _ptr), ("reps", _ptr),
+                ("r_alive", _ptr), ("r_ident", _ptr), ("S", _i64), ("nearest", _ptr), ("threads", _int)]
+
+
+class AssignIO(KernelStruct):
+    """``assign_io`` of ``breed.h``: ``assign_species``' arrays (pointers) and sizes."""
+    _fields_ = [("alive", _ptr), ("R", _i64), ("P", _i64), ("S", _i64), ("NN", _i64), ("W", _i64),
+                ("species", _ptr), ("founded", _ptr), ("n_founded", _ptr), ("taken", _ptr), ("nearest", _ptr),
+                ("r_ident", _ptr), ("threads", _int)]
+
+
+def breed_params(cfg: NEATConfig) -> BreedParams:
+    """The breeding and speciation kernels' parameters from ``cfg``."""
+    return BreedParams(
+        inherit_disabled=float(cfg.disabled_inherit_prob), node_add_prob=float(cfg.node_add_prob),
+        first_output=cfg.first_output, first_hidden=cfg.first_hidden, feed_forward=int(cfg.feed_forward),
+        per_gene=int(cfg.weight_mutate_per_gene), conn_add_prob=float(cfg.conn_add_prob),
+        w_mean=float(cfg.weight_init_mean), w_stdev=float(cfg.weight_init_stdev), w_min=float(cfg.weight_min_value),
+        w_max=float(cfg.weight_max_value), w_rate=float(cfg.weight_mutate_rate),
+        w_rate_sum=float(cfg.weight_mutate_rate + cfg.weight_replace_rate), w_replace=float(cfg.weight_replace_rate),
+        w_power=float(cfg.weight_mutate_power), s_rate=float(cfg.sigma_mutate_rate),
+        s_power=float(cfg.sigma_mutate_power), s_min=float(cfg.sigma_min_value), s_max=float(cfg.sigma_max_value),
+        toggle_rate=float(cfg.enabled_mutate_rate), exclusive=int(cfg.mutation_exclusive),
+        neatc=int(cfg.weight_mutate_neatc), recur_split=int(cfg.conn_add_recurrence), one_on=int(toggles_one(cfg)),
+        one_prob=float(cfg.toggle_enable_prob), re_prob=float(cfg.gene_reenable_prob),
+        clone_link_prob=_clone_link_prob(cfg), conn_tries=int(cfg.conn_add_tries),
+        w_uniform=int(cfg.weight_init_uniform), shared_link=int(cfg.conn_add_shared_weight),
+        split_first_bias=cfg.num_inputs if cfg.node_add_neatc else -1,
+        coef=(_f64 * 5)(cfg.compatibility_excess_coefficient, cfg.compatibility_disjoint_coefficient,
+                        cfg.compatibility_weight_coefficient, cfg.compatibility_sigma_coefficient,
+                        cfg.compatibility_normalize_min_genes),
+        thr=float(cfg.compatibility_threshold))
+
+
+def gene_set(g: GeneBits) -> GeneSet:
+    """The kernels' view of ``g`` (its tensors' addresses: valid while ``g`` lives)."""
+    return GeneSet(bits=g.bits.data_ptr(), before=g.before.data_ptr(), count=g.count.data_ptr(),
+                   top=g.top.data_ptr(), weight=g.weight.data_ptr(), sigma=g.sigma.data_ptr(),
+                   map=None if g.map is None else g.map.data_ptr())
 
 
 def _library() -> KernelLibrary | None:
@@ -201,41 +274,33 @@ def breed(g: Genomes, first: Tensor, second: Tensor, do_cross: Tensor, active: T
     genes = GeneBits.__new__(GeneBits)
     # the distance reads mutation_num where it is carried (speciate.distance_view)
     genes._bind(child.weight if child.mutation_num is None else child.mutation_num, child.sigma, dest)
-    rep_args: list = [None] * 7 + [0, None, 0.0, None]  # reps' bits .. alive, S, coefficients, threshold, out
-    rep_ident = None
+    rep_set, rep_ident, alive8, S = None, None, None, 0
     if reps is not None:
         rep_bits, rep_conn, alive, ident = reps
         # [NEATC]'s first fit goes by the species' numbers; the closest rule needs none
         rep_ident = ident.to(torch.int64).contiguous() if cfg.speciate_neatc else None
         genes.nearest = torch.empty(R, P, dtype=torch.int64)
         genes.nearest_to = (rep_bits, rep_conn, alive.clone())
-        alive8, coef = alive.to(torch.uint8).contiguous(), _coefficients(cfg)
-        rep_args = [*_genes_args(rep_bits)[:6], alive8.data_ptr(), alive.shape[1], coef.data_ptr(),
-                    float(cfg.compatibility_threshold), genes.nearest.data_ptr()]
+        rep_set, alive8, S = gene_set(rep_bits), alive.to(torch.uint8).contiguous(), alive.shape[1]
     bits, before = torch.empty(R * P, words, dtype=torch.int64), torch.empty(R * P, words, dtype=torch.int64)
     count, top = torch.empty(R * P, dtype=torch.int64), torch.empty(R * P, dtype=torch.int64)
-    getattr(lib, f"breed_{_sfx(T)}")(
-        parents["weight"].data_ptr(), parents["conn"].data_ptr(), parents["enabled"].data_ptr(),
-        parents["node"].data_ptr(), parents["sigma"].data_ptr(), a_idx.data_ptr(), b_idx.data_ptr(),
-        cross.data_ptr(), act.data_ptr(), child.weight.data_ptr(), child.conn.data_ptr(),
-        child.enabled.data_ptr(), child.node.data_ptr(), child.sigma.data_ptr(), src.data_ptr(),
-        dst.data_ptr(), request.data_ptr(), keys.data_ptr(), base.data_ptr(), blocks.data_ptr(), R, P, N,
-        float(cfg.disabled_inherit_prob), float(cfg.node_add_prob), new_node.data_ptr(), granted.data_ptr(),
-        cfg.first_output, int(cfg.feed_forward), int(cfg.weight_mutate_per_gene), float(cfg.conn_add_prob),
-        float(cfg.weight_init_mean), float(cfg.weight_init_stdev), float(cfg.weight_min_value),
-        float(cfg.weight_max_value), float(cfg.weight_mutate_rate),
-        float(cfg.weight_mutate_rate + cfg.weight_replace_rate), float(cfg.weight_replace_rate),
-        float(cfg.weight_mutate_power), float(cfg.sigma_mutate_rate), float(cfg.sigma_mutate_power),
-        float(cfg.sigma_min_value), float(cfg.sigma_max_value), float(cfg.enabled_mutate_rate),
-        reserved8.data_ptr(), cfg.first_hidden, None if dest is None else dest.data_ptr(), bits.data_ptr(),
-        before.data_ptr(), count.data_ptr(), top.data_ptr(), None if genes.map is None else genes.map.data_ptr(),
-        *rep_args, int(cfg.mutation_exclusive), int(cfg.weight_mutate_neatc), int(cfg.conn_add_recurrence),
-        int(toggles_one(cfg)), float(cfg.toggle_enable_prob), float(cfg.gene_reenable_prob),
-        _clone_link_prob(cfg), int(cfg.conn_add_tries), None if rep_ident is None else rep_ident.data_ptr(),
-        int(cfg.weight_init_uniform), int(cfg.conn_add_shared_weight),
-        None if g.mutation_num is None else parents["mutation_num"].data_ptr(),
-        None if g.mutation_num is None else child.mutation_num.data_ptr(),
-        cfg.num_inputs if cfg.node_add_neatc else -1, threads)
+    carried = g.mutation_num is not None
+    io = BreedIO(
+        pw=parents["weight"].data_ptr(), pc=parents["conn"].data_ptr(), pe=parents["enabled"].data_ptr(),
+        pn=parents["node"].data_ptr(), ps=parents["sigma"].data_ptr(),
+        pm=parents["mutation_num"].data_ptr() if carried else None, a_idx=a_idx.data_ptr(), b_idx=b_idx.data_ptr(),
+        do_cross=cross.data_ptr(), active=act.data_ptr(), cw=child.weight.data_ptr(), cc=child.conn.data_ptr(),
+        ce=child.enabled.data_ptr(), cn=child.node.data_ptr(), cs=child.sigma.data_ptr(),
+        cm=child.mutation_num.data_ptr() if carried else None, src=src.data_ptr(), dst=dst.data_ptr(),
+        request=request.data_ptr(), new_node=new_node.data_ptr(), granted=granted.data_ptr(), keys=keys.data_ptr(),
+        base=base.data_ptr(), blocks=blocks.data_ptr(), reserved=reserved8.data_ptr(),
+        dest_runs=None if dest is None else dest.data_ptr(), R=R, P=P, N=N, gbits=bits.data_ptr(),
+        gbefore=before.data_ptr(), gcount=count.data_ptr(), gtop=top.data_ptr(),
+        gmap=None if genes.map is None else genes.map.data_ptr(),
+        reps=None if rep_set is None else ctypes.addressof(rep_set), r_alive=None if alive8 is None else alive8.data_ptr(),
+        r_ident=None if rep_ident is None else rep_ident.data_ptr(), S=S,
+        nearest=None if genes.nearest is None else genes.nearest.data_ptr(), threads=threads)
+    getattr(lib, f"breed_{_sfx(T)}")(ctypes.byref(breed_params(cfg)), ctypes.byref(io))
     genes.bits, genes.before, genes.count, genes.top = bits, before, count, top
     return child, request.bool() & ~granted.bool(), genes
 
@@ -331,17 +396,6 @@ def touched_nodes(genes: GeneBits, alive: Tensor) -> Tensor:
     return out
 
 
-def _coefficients(cfg: NEATConfig) -> Tensor:
-    return torch.tensor([cfg.compatibility_excess_coefficient, cfg.compatibility_disjoint_coefficient,
-                         cfg.compatibility_weight_coefficient, cfg.compatibility_sigma_coefficient,
-                         cfg.compatibility_normalize_min_genes], dtype=torch.float64)
-
-
-def _genes_args(g: GeneBits) -> list[int]:
-    return [g.bits.data_ptr(), g.before.data_ptr(), g.count.data_ptr(), g.top.data_ptr(), g.weight.data_ptr(),
-            g.sigma.data_ptr(), None if g.map is None else g.map.data_ptr()]
-
-
 def assign_species(genes: GeneBits, reps: GeneBits, alive: Tensor, cfg: NEATConfig,
                    nearest: Tensor | None = None, ident: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor]:
     """``speciate``'s assignment for genomes ``genes`` (``R x P`` rows) and representatives
@@ -363,12 +417,12 @@ def assign_species(genes: GeneBits, reps: GeneBits, alive: Tensor, cfg: NEATConf
     founded = torch.zeros(R, P, dtype=torch.int64)
     n_founded = torch.empty(R, dtype=torch.int64)
     taken = torch.empty(R, S + P, dtype=torch.uint8)
-    alive8, coef = alive.to(torch.uint8).contiguous(), _coefficients(cfg)
+    alive8 = alive.to(torch.uint8).contiguous()
     near = None if nearest is None else nearest.to(torch.int64).contiguous()
+    io = AssignIO(alive=alive8.data_ptr(), R=R, P=P, S=S, NN=genes.nn, W=genes.words, species=species.data_ptr(),
+                  founded=founded.data_ptr(), n_founded=n_founded.data_ptr(), taken=taken.data_ptr(),
+                  nearest=None if near is None else near.data_ptr(), r_ident=None if ident is None else ident.data_ptr(),
+                  threads=torch.get_num_threads())
     getattr(_kernels(), f"assign_species_{_sfx(genes.weight.dtype)}")(
-        *_genes_args(genes), *_genes_args(reps), alive8.data_ptr(), R, P, S, genes.nn, genes.words,
-        coef.data_ptr(), float(cfg.compatibility_threshold), species.data_ptr(), founded.data_ptr(),
-        n_founded.data_ptr(), taken.data_ptr(), None if near is None else near.data_ptr(),
-        None if ident is None else ident.data_ptr(), torch.get_num_threads())
+        ctypes.byref(breed_params(cfg)), ctypes.byref(gene_set(genes)), ctypes.byref(gene_set(reps)), ctypes.byref(io))
     return species, founded, n_founded
-

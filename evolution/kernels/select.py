@@ -18,14 +18,15 @@ a time (threads share out the runs), with the same draws (addressed by counter,
   without members emptied.
 
 The C is ``evolution/kernels/csrc/select.c`` (exports declared in ``select.h``), built once per machine
-by ``snn_torch.kernels.build``.
+by ``snn_torch.kernels.build``. Each entry point takes structs declared there: the config's
+parameters (``SelectParams``, built by ``select_params``) and its arrays and sizes (``*IO``).
 """
 
 from __future__ import annotations
 
+import ctypes
 import dataclasses
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor
@@ -33,18 +34,61 @@ from torch import Tensor
 from evolution.config import NEATConfig
 from evolution.population import Genomes
 from evolution.rng import RunRNG
-from snn_torch.kernels.build import KernelLibrary, load_library
-
-if TYPE_CHECKING:
-    from evolution.speciate import SpeciesState
+from evolution.species_state import SpeciesState
+from snn_torch.kernels.build import KernelLibrary, KernelStruct, load_library
 
 __all__ = ["kernel_available", "select_parents", "species_offspring", "species_state_offspring", "choose_representatives",
-           "SELECTION_DRAWS"]
+           "SELECTION_DRAWS", "SelectParams", "SelectParentsIO", "OffspringIO", "RepsIO", "select_params"]
 
 SELECTION_DRAWS = 5  # float64 uniform blocks of P per run: p1, p2, any parent, interspecies, crossover
 
 _CSRC = Path(__file__).resolve().parent / "csrc"
 LIBRARY = ("neat_select", _CSRC / "select.c", _CSRC / "select.h")  # (name, source, header)
+
+
+_i64, _f64, _int, _ptr = ctypes.c_int64, ctypes.c_double, ctypes.c_int, ctypes.c_void_p
+
+
+class SelectParams(KernelStruct):
+    """``select_params`` of ``select.h``: what the kernels take from ``NEATConfig``."""
+    _fields_ = [("survival", _f64), ("survival_neatc", _int), ("elitism", _i64), ("elitism_min", _i64),
+                ("inter_prob", _f64), ("cross_prob", _f64), ("max_stagnation", _i64), ("species_elitism", _i64),
+                ("penalty", _f64), ("obliterate_interval", _i64), ("obliterate_min_age", _i64),
+                ("pop_stagnation", _i64), ("clock_before", _i64)]
+
+
+class SelectParentsIO(KernelStruct):
+    """``select_parents_io`` of ``select.h``: ``select_parents``' arrays (pointers) and sizes."""
+    _fields_ = [("fitness", _ptr), ("species", _ptr), ("survivors", _ptr), ("counts", _ptr), ("keys", _ptr),
+                ("base", _ptr), ("champions", _ptr), ("R", _i64), ("P", _i64), ("S", _i64), ("first", _ptr),
+                ("second", _ptr), ("do_cross", _ptr), ("elite", _ptr), ("threads", _int)]
+
+
+class OffspringIO(KernelStruct):
+    """``offspring_io`` of ``select.h``: ``species_offspring``'s arrays (pointers) and sizes."""
+    _fields_ = [("fitness", _ptr), ("species", _ptr), ("alive", _ptr), ("best_in", _ptr), ("last_in", _ptr),
+                ("created", _ptr), ("obl_in", _ptr), ("run_best_in", _ptr), ("run_stale_in", _ptr), ("R", _i64),
+                ("P", _i64), ("S", _i64), ("generation", _i64), ("best_out", _ptr), ("last_out", _ptr),
+                ("obl_out", _ptr), ("run_best_out", _ptr), ("run_stale_out", _ptr), ("survivors", _ptr),
+                ("counts", _ptr), ("delta", _ptr), ("threads", _int)]
+
+
+class RepsIO(KernelStruct):
+    """``reps_io`` of ``select.h``: ``choose_representatives``' arrays (pointers) and sizes."""
+    _fields_ = [("species", _ptr), ("conn", _ptr), ("weight", _ptr), ("sigma", _ptr), ("runs", _ptr),
+                ("keys", _ptr), ("base", _ptr), ("R", _i64), ("P", _i64), ("S", _i64), ("NN", _i64),
+                ("alive", _ptr), ("rep_conn", _ptr), ("rep_weight", _ptr), ("rep_sigma", _ptr), ("threads", _int)]
+
+
+def select_params(cfg: NEATConfig) -> SelectParams:
+    """The selection kernels' parameters from ``cfg``."""
+    return SelectParams(
+        survival=float(cfg.survival_threshold), survival_neatc=int(cfg.survival_neatc), elitism=int(cfg.elitism),
+        elitism_min=int(cfg.elitism_min_species_size), inter_prob=float(cfg.interspecies_crossover_prob),
+        cross_prob=float(cfg.crossover_prob), max_stagnation=int(cfg.max_stagnation),
+        species_elitism=int(cfg.species_elitism), penalty=float(cfg.stagnant_fitness_factor),
+        obliterate_interval=int(cfg.obliterate_interval), obliterate_min_age=int(cfg.obliterate_min_age),
+        pop_stagnation=int(cfg.population_stagnation), clock_before=int(cfg.stagnation_clock_before))
 
 
 def _library() -> KernelLibrary | None:
@@ -86,12 +130,12 @@ def select_parents(fitness: Tensor, species: Tensor, survivors: Tensor, counts: 
     sp, sv, cnt = species.contiguous(), survivors.to(torch.uint8).contiguous(), counts.contiguous()
     keys = rng.keys.contiguous()
     champ = None if champions is None else champions.to(torch.uint8).contiguous()
-    lib.select_parents(f.data_ptr(), sp.data_ptr(), sv.data_ptr(), cnt.data_ptr(), keys.data_ptr(),
-                       base.data_ptr(), R, P, S, float(cfg.survival_threshold), int(cfg.survival_neatc),
-                       cfg.elitism,
-                       cfg.elitism_min_species_size, float(cfg.interspecies_crossover_prob),
-                       float(cfg.crossover_prob), first.data_ptr(), second.data_ptr(), do_cross.data_ptr(),
-                       elite.data_ptr(), None if champ is None else champ.data_ptr(), torch.get_num_threads())
+    io = SelectParentsIO(fitness=f.data_ptr(), species=sp.data_ptr(), survivors=sv.data_ptr(), counts=cnt.data_ptr(),
+                         keys=keys.data_ptr(), base=base.data_ptr(),
+                         champions=None if champ is None else champ.data_ptr(), R=R, P=P, S=S,
+                         first=first.data_ptr(), second=second.data_ptr(), do_cross=do_cross.data_ptr(),
+                         elite=elite.data_ptr(), threads=torch.get_num_threads())
+    lib.select_parents(ctypes.byref(select_params(cfg)), ctypes.byref(io))
     return first, second, do_cross.bool(), elite.bool()
 
 
@@ -141,14 +185,14 @@ def _offspring(fitness: Tensor, species: Tensor, alive: Tensor, best_fitness: Te
     b_in, l_in = best_fitness.to(torch.float64).contiguous(), last_improved.to(torch.int64).contiguous()
     created, o_in = created.to(torch.int64).contiguous(), obliterated.to(torch.uint8).contiguous()
     rb_in, rs_in = run_best.to(torch.float64).contiguous(), run_stale.to(torch.int64).contiguous()
-    lib.species_offspring(f.data_ptr(), spc.data_ptr(), al.data_ptr(), b_in.data_ptr(), l_in.data_ptr(),
-                          created.data_ptr(), o_in.data_ptr(), rb_in.data_ptr(), rs_in.data_ptr(), R, P, S,
-                          int(generation), int(cfg.max_stagnation), int(cfg.species_elitism),
-                          float(cfg.stagnant_fitness_factor), int(cfg.obliterate_interval),
-                          int(cfg.obliterate_min_age), int(cfg.population_stagnation),
-                          int(cfg.stagnation_clock_before), best.data_ptr(),
-                          last.data_ptr(), obl.data_ptr(), run_best_out.data_ptr(), run_stale_out.data_ptr(),
-                          survivors.data_ptr(), counts.data_ptr(), delta.data_ptr(), torch.get_num_threads())
+    io = OffspringIO(fitness=f.data_ptr(), species=spc.data_ptr(), alive=al.data_ptr(), best_in=b_in.data_ptr(),
+                     last_in=l_in.data_ptr(), created=created.data_ptr(), obl_in=o_in.data_ptr(),
+                     run_best_in=rb_in.data_ptr(), run_stale_in=rs_in.data_ptr(), R=R, P=P, S=S,
+                     generation=int(generation), best_out=best.data_ptr(), last_out=last.data_ptr(),
+                     obl_out=obl.data_ptr(), run_best_out=run_best_out.data_ptr(),
+                     run_stale_out=run_stale_out.data_ptr(), survivors=survivors.data_ptr(),
+                     counts=counts.data_ptr(), delta=delta.data_ptr(), threads=torch.get_num_threads())
+    lib.species_offspring(ctypes.byref(select_params(cfg)), ctypes.byref(io))
     return {"best_fitness": best, "last_improved": last, "obliterated": obl.bool(), "run_best": run_best_out,
             "run_stale": run_stale_out, "survivors": survivors.bool(), "counts": counts, "delta": delta.bool()}
 
@@ -169,9 +213,9 @@ def choose_representatives(g: Genomes, species: Tensor, capacity: int, rng: RunR
     conn, weight, sigma = g.conn.contiguous(), g.weight.contiguous(), g.sigma.contiguous()
     sp, keys = species.contiguous(), rng.keys.contiguous()
     rows = None if runs is None else runs.to(torch.int64).cpu().contiguous()
-    getattr(lib, f"choose_representatives_{'f32' if T == torch.float32 else 'f64'}")(
-        sp.data_ptr(), conn.data_ptr(), weight.data_ptr(), sigma.data_ptr(), None if rows is None else rows.data_ptr(),
-        keys.data_ptr(), base.data_ptr(),
-        R, P, capacity, N * N, alive.data_ptr(), rep_conn.data_ptr(), rep_weight.data_ptr(), rep_sigma.data_ptr(),
-        torch.get_num_threads())
+    io = RepsIO(species=sp.data_ptr(), conn=conn.data_ptr(), weight=weight.data_ptr(), sigma=sigma.data_ptr(),
+                runs=None if rows is None else rows.data_ptr(), keys=keys.data_ptr(), base=base.data_ptr(), R=R,
+                P=P, S=capacity, NN=N * N, alive=alive.data_ptr(), rep_conn=rep_conn.data_ptr(),
+                rep_weight=rep_weight.data_ptr(), rep_sigma=rep_sigma.data_ptr(), threads=torch.get_num_threads())
+    getattr(lib, f"choose_representatives_{'f32' if T == torch.float32 else 'f64'}")(ctypes.byref(io))
     return alive.bool(), rep_conn, rep_weight, rep_sigma

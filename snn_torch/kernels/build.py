@@ -4,8 +4,10 @@ Kernels are ``.c``/``.h`` files shipped as package data (``snn_torch/kernels/csr
 Each library's exported functions are declared once, in its header: ``load_library`` reads the
 prototypes there and sets every function's ``ctypes`` signature from them, and the ``.c`` file
 includes the header, so the compiler checks that the definitions match. A header function
-missing from the built library is an error at load. Headers a file includes by
-``#include "name.h"`` are read from its folder (else from ``snn_torch/kernels/csrc``, the shared
+missing from the built library is an error at load. Entry points with many parameters take
+them as structs declared in the header (``parse_structs`` reads them), mirrored in Python by
+``KernelStruct`` subclasses, so that no parameter can shift into another's place. Headers a
+file includes by ``#include "name.h"`` are read from its folder (else from ``snn_torch/kernels/csrc``, the shared
 headers) and are part of the build (and its cache key).
 ``load_libraries`` builds several libraries side by side, one compiler process each.
 
@@ -32,8 +34,8 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-__all__ = ["load_library", "load_libraries", "kernels_enabled", "parse_prototypes",
-           "KernelLibrary", "library_loader"]
+__all__ = ["load_library", "load_libraries", "kernels_enabled", "parse_prototypes", "parse_structs",
+           "KernelLibrary", "KernelStruct", "library_loader"]
 
 # No contraction, no fast-math: the kernels must repeat torch's IEEE operations exactly.
 FLAGS = ["-O3", "-march=native", "-ffp-contract=off", "-fno-fast-math", "-fopenmp", "-shared", "-fPIC", "-std=c11"]
@@ -46,6 +48,8 @@ _CTYPES = {
     "float": ctypes.c_float, "double": ctypes.c_double,
 }
 _PROTOTYPE = re.compile(r"^\s*(\w+)\s+(\w+)\s*\(([^)]*)\)\s*;", re.MULTILINE)
+_STRUCT = re.compile(r"typedef\s+struct\s*\w*\s*\{([^}]*)\}\s*(\w+)\s*;")
+_FIELD = re.compile(r"^(?:const\s+)?(\w+)\s*(\*?)\s*(?:const\s+)?(\w+)\s*(?:\[(\d+)\])?$")
 SHARED_CSRC = Path(__file__).resolve().parent / "csrc"  # headers every library may include (counter_rng.h)
 _LOCAL_INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.MULTILINE)
 
@@ -95,6 +99,43 @@ def parse_prototypes(header: str) -> dict[str, tuple[object, list[object]]]:
             argtypes.append(_CTYPES[words[0]])
         out[name] = (_CTYPES[ret], argtypes)
     return out
+
+
+def parse_structs(header: str) -> dict[str, list[tuple[str, object]]]:
+    """``{name: [(field, ctypes type), ...]}`` for every ``typedef struct { ... } name;`` in
+    ``header``'s text, in declaration order: what a ``ctypes.Structure`` mirroring it must hold.
+
+    Pointers of any type map to ``c_void_p``, ``T name[K]`` to ``ctype * K``. A field is one
+    declarator per statement; anything else (several names, function pointers, unknown types)
+    raises ``ValueError`` naming the struct and the field.
+    """
+    text = re.sub(r"/\*.*?\*/", "", header, flags=re.DOTALL)
+    out: dict[str, list[tuple[str, object]]] = {}
+    for body, name in _STRUCT.findall(text):
+        fields: list[tuple[str, object]] = []
+        for decl in (d.strip() for d in body.split(";")):
+            if not decl:
+                continue
+            m = _FIELD.match(" ".join(decl.split()))
+            if m is None or (not m.group(2) and (m.group(1) not in _CTYPES or m.group(1) == "void")):
+                raise ValueError(f"struct {name}: cannot map field {decl!r} to a ctypes type")
+            ctype = ctypes.c_void_p if m.group(2) else _CTYPES[m.group(1)]
+            fields.append((m.group(3), ctype * int(m.group(4)) if m.group(4) else ctype))
+        out[name] = fields
+    return out
+
+
+class KernelStruct(ctypes.Structure):
+    """Base of the ``ctypes.Structure`` mirrors of the kernels' parameter structs (declared in
+    their headers; ``parse_structs`` reads those, and the tests compare the two). Built with
+    every field named: a field left out would silently be 0 or NULL, a misspelt one ignored."""
+
+    def __init__(self, **values: object) -> None:
+        names = {name for name, _ in self._fields_}
+        missing, unknown = names - values.keys(), values.keys() - names
+        if missing or unknown:
+            raise TypeError(f"{type(self).__name__}: missing fields {sorted(missing)}, unknown {sorted(unknown)}")
+        super().__init__(**values)
 
 
 class KernelLibrary:

@@ -10,18 +10,20 @@
 
 #define DEFINE_DISTANCES(T, SFX)                                                                  \
 /* Distances between genome rows a[r, i] and b[r, j] (rows index the sets' flat arrays). */     \
-void distances_##SFX(const uint64_t *bits_a, const int64_t *pre_a, const int64_t *cnt_a, const int64_t *top_a,\
-                     const T *w_a, const T *sig_a, const int64_t *map_a, const int64_t *rows_a, int64_t Ka,\
-                     const uint64_t *bits_b, const int64_t *pre_b, const int64_t *cnt_b, const int64_t *top_b,\
-                     const T *w_b, const T *sig_b, const int64_t *map_b, const int64_t *rows_b, int64_t Kb,\
-                     int64_t R, int64_t NN, int64_t W, const double *coef, double *out, int threads) { \
-    const genes_##SFX a = {bits_a, pre_a, cnt_a, top_a, w_a, sig_a, map_a};                       \
-    const genes_##SFX b = {bits_b, pre_b, cnt_b, top_b, w_b, sig_b, map_b};                       \
-    _Pragma("omp parallel for schedule(static) num_threads(threads)")                            \
+void distances_##SFX(const breed_params *cfg, const gene_set *sa, const gene_set *sb,            \
+                     const distances_io *io) {                                                    \
+    const genes_##SFX a = {sa->bits, sa->before, sa->count, sa->top, (const T *)sa->weight,       \
+                           (const T *)sa->sigma, sa->map};                                         \
+    const genes_##SFX b = {sb->bits, sb->before, sb->count, sb->top, (const T *)sb->weight,       \
+                           (const T *)sb->sigma, sb->map};                                         \
+    const int64_t *rows_a = io->rows_a, *rows_b = io->rows_b, Ka = io->Ka, Kb = io->Kb;           \
+    const int64_t R = io->R, NN = io->NN, W = io->W;                                              \
+    double *out = io->out;                                                                        \
+    _Pragma("omp parallel for schedule(static) num_threads(io->threads)")                        \
     for (int64_t q = 0; q < R * Ka; ++q) {                                                        \
         const int64_t r = q / Ka;                                                                 \
         for (int64_t jb = 0; jb < Kb; ++jb)                                                       \
-            out[q * Kb + jb] = pair_dist_##SFX(a, rows_a[q], b, rows_b[r * Kb + jb], NN, W, coef, INFINITY); \
+            out[q * Kb + jb] = pair_dist_##SFX(a, rows_a[q], b, rows_b[r * Kb + jb], NN, W, cfg->coef, INFINITY); \
     }                                                                                             \
 }
 DEFINE_DISTANCES(float, f32)

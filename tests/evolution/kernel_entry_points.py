@@ -8,6 +8,7 @@ nor compiles them. They reach the production kernels' code through the shared he
 
 from __future__ import annotations
 
+import ctypes
 from pathlib import Path
 
 import torch
@@ -15,14 +16,21 @@ from torch import Tensor
 
 from evolution.config import NEATConfig
 from evolution.kernels import breed as breed_kernel
-from evolution.kernels.breed import GeneBits, _coefficients, _genes_args, _sfx
-from snn_torch.kernels.build import KernelLibrary, load_library
+from evolution.kernels.breed import GeneBits, _sfx, breed_params, gene_set
+from snn_torch.kernels.build import KernelLibrary, KernelStruct, load_library
 
-__all__ = ["library", "gene_distances"]
+__all__ = ["library", "gene_distances", "DistancesIO"]
 
 _CSRC = Path(__file__).resolve().parents[1] / "csrc"
 _KERNEL_HEADERS = Path(breed_kernel.__file__).resolve().parent / "csrc"  # box_muller.h, gene_distance.h
 LIBRARY = ("neat_kernel_tests", _CSRC / "kernel_entry_points.c", _CSRC / "kernel_entry_points.h")
+
+
+class DistancesIO(KernelStruct):
+    """``distances_io`` of ``kernel_entry_points.h``: the rows compared, and the output."""
+    _fields_ = [("rows_a", ctypes.c_void_p), ("Ka", ctypes.c_int64), ("rows_b", ctypes.c_void_p),
+                ("Kb", ctypes.c_int64), ("R", ctypes.c_int64), ("NN", ctypes.c_int64), ("W", ctypes.c_int64),
+                ("out", ctypes.c_void_p), ("threads", ctypes.c_int)]
 
 
 def library() -> KernelLibrary | None:
@@ -42,8 +50,9 @@ def gene_distances(a: GeneBits, rows_a: Tensor, b: GeneBits, rows_b: Tensor, cfg
     out = torch.empty(R, Ka, Kb, dtype=torch.float64)
     if R * Ka * Kb == 0:
         return out
-    ra, rb, coef = rows_a.contiguous(), rows_b.contiguous(), _coefficients(cfg)
-    getattr(lib, f"distances_{_sfx(a.weight.dtype)}")(
-        *_genes_args(a), ra.data_ptr(), Ka, *_genes_args(b), rb.data_ptr(), Kb, R, a.nn, a.words,
-        coef.data_ptr(), out.data_ptr(), torch.get_num_threads())
+    ra, rb = rows_a.contiguous(), rows_b.contiguous()
+    io = DistancesIO(rows_a=ra.data_ptr(), Ka=Ka, rows_b=rb.data_ptr(), Kb=Kb, R=R, NN=a.nn, W=a.words,
+                     out=out.data_ptr(), threads=torch.get_num_threads())
+    getattr(lib, f"distances_{_sfx(a.weight.dtype)}")(ctypes.byref(breed_params(cfg)), ctypes.byref(gene_set(a)),
+                                                      ctypes.byref(gene_set(b)), ctypes.byref(io))
     return out

@@ -6,61 +6,134 @@
 
 #include <stdint.h>
 
+/* What the breeding and speciation kernels take from NEATConfig, built by
+   evolution.kernels.breed.breed_params (the config's names in brackets). */
+typedef struct {
+    double inherit_disabled;     /* disabled_inherit_prob */
+    double node_add_prob;
+    int64_t first_output;
+    int64_t first_hidden;
+    int feed_forward;
+    int per_gene;                /* weight_mutate_per_gene */
+    double conn_add_prob;
+    double w_mean;               /* weight_init_mean */
+    double w_stdev;              /* weight_init_stdev */
+    double w_min;                /* weight_min_value */
+    double w_max;                /* weight_max_value */
+    double w_rate;               /* weight_mutate_rate */
+    double w_rate_sum;           /* weight_mutate_rate + weight_replace_rate */
+    double w_replace;            /* weight_replace_rate */
+    double w_power;              /* weight_mutate_power */
+    double s_rate;               /* sigma_mutate_rate */
+    double s_power;              /* sigma_mutate_power */
+    double s_min;                /* sigma_min_value */
+    double s_max;                /* sigma_max_value */
+    double toggle_rate;          /* enabled_mutate_rate */
+    int exclusive;               /* mutation_exclusive */
+    int neatc;                   /* weight_mutate_neatc */
+    int recur_split;             /* conn_add_recurrence */
+    int one_on;                  /* mutate_toggle_one runs (breed.toggles_one) */
+    double one_prob;             /* toggle_enable_prob */
+    double re_prob;              /* gene_reenable_prob */
+    double clone_link_prob;      /* a delta-coding clone's new link (neat121.CLONE_LINK_PROB, or 0) */
+    int64_t conn_tries;          /* conn_add_tries */
+    int w_uniform;               /* weight_init_uniform */
+    int shared_link;             /* conn_add_shared_weight */
+    int64_t split_first_bias;    /* node_add_neatc: the first bias node (num_inputs), else -1 */
+    double coef[5];              /* compatibility_{excess, disjoint, weight, sigma}_coefficient,
+                                    compatibility_normalize_min_genes */
+    double thr;                  /* compatibility_threshold */
+} breed_params;
+
+/* Gene bitsets of M genome rows (evolution.kernels.breed.GeneBits) and the weights and sigmas
+   the distance reads beside them; weight and sigma of the entry point's type (float for _f32,
+   double for _f64). */
+typedef struct {
+    const uint64_t *bits;        /* [M, W] */
+    const int64_t *before;       /* [M, W] genes in the words before */
+    const int64_t *count;        /* [M] */
+    const int64_t *top;          /* [M] highest slot, -1: none */
+    const void *weight;          /* [*, NN] */
+    const void *sigma;           /* [*] */
+    const int64_t *map;          /* [M] the weight and sigma row of each bitset row, or NULL: the same */
+} gene_set;
+
+/* breed's arrays: parents p* [*, P, ...] (rows a_idx, b_idx), children c* [R, P, ...], the run's
+   draws, the node registry, the children's bitsets g*; with reps, each child's closest
+   representative (speciate's first step). pw, ps, pm, cw, cs, cm of the entry point's type;
+   pm, cm: mutation_num ([NEATC]), or NULL where not carried (with cm, the closest
+   representative goes by the children's mutation_num). */
+typedef struct {
+    const void *pw;
+    const uint8_t *pc;
+    const uint8_t *pe;
+    const uint8_t *pn;
+    const void *ps;
+    const void *pm;
+    const int64_t *a_idx;        /* [R, P] the parents' rows */
+    const int64_t *b_idx;
+    const uint8_t *do_cross;     /* [R, P] 1 cross, 2 average the matching weights */
+    const uint8_t *active;       /* [R, P] mutate; bits 2 severe, 4 recurrent link, 8 a clone */
+    void *cw;
+    uint8_t *cc;
+    uint8_t *ce;
+    uint8_t *cn;
+    void *cs;
+    void *cm;
+    int64_t *src;                /* [R, P] the split gene's ends */
+    int64_t *dst;
+    uint8_t *request;            /* [R, P] a split asked for */
+    int64_t *new_node;           /* [R, P] its node */
+    uint8_t *granted;            /* [R, P] a free slot found */
+    const int64_t *keys;         /* [R] */
+    const int64_t *base;         /* [R] the step's first counter */
+    const int64_t *blocks;       /* the draw blocks' first counters (breed_blocks) */
+    const uint8_t *reserved;     /* [R, N] node slots not to give a new node */
+    const int64_t *dest_runs;    /* [R] in place: the children overwrite these runs, or NULL */
+    int64_t R;
+    int64_t P;
+    int64_t N;
+    uint64_t *gbits;             /* [R * P, W] the children's bitsets out */
+    int64_t *gbefore;
+    int64_t *gcount;
+    int64_t *gtop;
+    const int64_t *gmap;         /* the children's weight rows, or NULL */
+    const gene_set *reps;        /* [R, S] the representatives, or NULL: no closest search */
+    const uint8_t *r_alive;      /* [R, S] */
+    const int64_t *r_ident;      /* [R, S] species numbers: [NEATC]'s first fit, or NULL: closest */
+    int64_t S;
+    int64_t *nearest;            /* [R, P] out, -1: none within the threshold */
+    int threads;
+} breed_io;
+
+/* assign_species' arrays: living slots alive [R, S]; species [R, P], founded [R, P] and
+   n_founded [R] out; taken [R, S + P] scratch; nearest [R, P] (found by breed) or NULL. */
+typedef struct {
+    const uint8_t *alive;
+    int64_t R;
+    int64_t P;
+    int64_t S;
+    int64_t NN;
+    int64_t W;
+    int64_t *species;
+    int64_t *founded;
+    int64_t *n_founded;
+    uint8_t *taken;
+    const int64_t *nearest;
+    const int64_t *r_ident;      /* [R, S] species numbers: [NEATC]'s first fit, or NULL: closest */
+    int threads;
+} assign_io;
+
 /* One breeding step, a run at a time: crossover, add-node with the run's node registry,
    add-connection, weight, sigma and enabled mutations; the children's gene bitsets; with the
-   representatives (r_*), each child's closest one (speciate's first step). pm, cm: the parents'
-   and children's mutation_num ([NEATC]), or NULL where not carried; with cm, the closest
-   representative goes by the children's mutation_num. split_first_bias: the first bias node for
-   [NEATC]'s choice of the gene to split (node_add_neatc), or -1 for any enabled gene. */
-void breed_f32(const float *pw, const uint8_t *pc, const uint8_t *pe, const uint8_t *pn, const float *ps,
-               const int64_t *a_idx, const int64_t *b_idx, const uint8_t *do_cross, const uint8_t *active,
-               float *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, float *cs, int64_t *src, int64_t *dst,
-               uint8_t *request, const int64_t *keys, const int64_t *base, const int64_t *blocks, int64_t R,
-               int64_t P, int64_t N, double inherit_disabled, double node_add_prob, int64_t *new_node,
-               uint8_t *granted, int64_t first_output, int feed_forward, int per_gene, double conn_add_prob,
-               double w_mean, double w_stdev, double w_min, double w_max, double w_rate, double w_rate_sum,
-               double w_replace, double w_power, double s_rate, double s_power, double s_min, double s_max,
-               double toggle_rate, const uint8_t *reserved, int64_t first_hidden, const int64_t *dest_runs,
-               uint64_t *gbits, int64_t *gbefore, int64_t *gcount, int64_t *gtop, const int64_t *gmap,
-               const uint64_t *r_bits, const int64_t *r_pre, const int64_t *r_cnt, const int64_t *r_top,
-               const float *r_w, const float *r_sig, const uint8_t *r_alive, int64_t S, const double *coef,
-               double thr, int64_t *nearest, int exclusive, int neatc, int recur_split, int one_on,
-               double one_prob, double re_prob, double clone_link_prob, int64_t conn_tries,
-               const int64_t *r_ident, int w_uniform, int shared_link, const float *pm, float *cm,
-               int64_t split_first_bias, int threads);
-void breed_f64(const double *pw, const uint8_t *pc, const uint8_t *pe, const uint8_t *pn, const double *ps,
-               const int64_t *a_idx, const int64_t *b_idx, const uint8_t *do_cross, const uint8_t *active,
-               double *cw, uint8_t *cc, uint8_t *ce, uint8_t *cn, double *cs, int64_t *src, int64_t *dst,
-               uint8_t *request, const int64_t *keys, const int64_t *base, const int64_t *blocks, int64_t R,
-               int64_t P, int64_t N, double inherit_disabled, double node_add_prob, int64_t *new_node,
-               uint8_t *granted, int64_t first_output, int feed_forward, int per_gene, double conn_add_prob,
-               double w_mean, double w_stdev, double w_min, double w_max, double w_rate, double w_rate_sum,
-               double w_replace, double w_power, double s_rate, double s_power, double s_min, double s_max,
-               double toggle_rate, const uint8_t *reserved, int64_t first_hidden, const int64_t *dest_runs,
-               uint64_t *gbits, int64_t *gbefore, int64_t *gcount, int64_t *gtop, const int64_t *gmap,
-               const uint64_t *r_bits, const int64_t *r_pre, const int64_t *r_cnt, const int64_t *r_top,
-               const double *r_w, const double *r_sig, const uint8_t *r_alive, int64_t S, const double *coef,
-               double thr, int64_t *nearest, int exclusive, int neatc, int recur_split, int one_on,
-               double one_prob, double re_prob, double clone_link_prob, int64_t conn_tries,
-               const int64_t *r_ident, int w_uniform, int shared_link, const double *pm, double *cm,
-               int64_t split_first_bias, int threads);
+   representatives, each child's closest one (speciate's first step). */
+void breed_f32(const breed_params *cfg, const breed_io *io);
+void breed_f64(const breed_params *cfg, const breed_io *io);
 /* speciate's assignment: the closest living representative within thr, else found a species. */
-void assign_species_f32(const uint64_t *g_bits, const int64_t *g_pre, const int64_t *g_cnt,
-                        const int64_t *g_top, const float *g_w, const float *g_sig, const int64_t *g_map,
-                        const uint64_t *r_bits, const int64_t *r_pre, const int64_t *r_cnt,
-                        const int64_t *r_top, const float *r_w, const float *r_sig, const int64_t *r_map,
-                        const uint8_t *alive, int64_t R, int64_t P, int64_t S, int64_t NN, int64_t W,
-                        const double *coef, double thr, int64_t *species, int64_t *founded,
-                        int64_t *n_founded, uint8_t *taken, const int64_t *nearest,
-                        const int64_t *r_ident, int threads);
-void assign_species_f64(const uint64_t *g_bits, const int64_t *g_pre, const int64_t *g_cnt,
-                        const int64_t *g_top, const double *g_w, const double *g_sig, const int64_t *g_map,
-                        const uint64_t *r_bits, const int64_t *r_pre, const int64_t *r_cnt,
-                        const int64_t *r_top, const double *r_w, const double *r_sig, const int64_t *r_map,
-                        const uint8_t *alive, int64_t R, int64_t P, int64_t S, int64_t NN, int64_t W,
-                        const double *coef, double thr, int64_t *species, int64_t *founded,
-                        int64_t *n_founded, uint8_t *taken, const int64_t *nearest,
-                        const int64_t *r_ident, int threads);
+void assign_species_f32(const breed_params *cfg, const gene_set *genes, const gene_set *reps,
+                        const assign_io *io);
+void assign_species_f64(const breed_params *cfg, const gene_set *genes, const gene_set *reps,
+                        const assign_io *io);
 /* Gene bitsets, gene counts before each word, counts and highest slot of rows conn[M, NN]. */
 void gene_bits(const uint8_t *conn, const int64_t *rows, const uint8_t *alive, int64_t M, int64_t NN,
                int64_t W, uint64_t *bits, int64_t *before, int64_t *count, int64_t *top, int threads);

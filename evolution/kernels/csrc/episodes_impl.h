@@ -329,21 +329,27 @@ static void FN(fail_)(int64_t *error, int64_t kind, int64_t row, int64_t code) {
     }
 }
 
-int64_t FN(episodes_spiking_)(const void *step_fn, const void *observe_fn, const double *plant_params,
-                              int64_t plant_bytes, int64_t width, const void *starts, int64_t start_rows, int64_t episodes,
-                              int64_t n_obs, int64_t n_act, int64_t max_steps, const T *offset, const T *scale,
-                              int64_t coding, int64_t clip, int64_t n_in,
-                              const T *w, const T *v0, const T *u0, const T *z0, int64_t n, const T *iconst, T gain,
-                              const int64_t *keys, const T *w_out, const T *rest, const T *sigma, int64_t window,
-                              double period_s, int64_t substeps, T dt, T a, T b, T c, T d, T vpeak,
-                              int64_t decoder, double action_max, double threshold, int64_t settle, int64_t syn,
-                              double syn_k, int64_t rows, double *returns, int64_t *steps, int64_t *error,
-                              int threads) {
-    const FN(plant_t_) plant = {(native_step_fn)step_fn, (native_observe_fn)observe_fn, plant_params,
-                                (const unsigned char *)starts, width * plant_bytes, width, start_rows, episodes, n_obs, n_act,
-                                max_steps, rows, offset, scale, coding, clip, n_in, returns, steps};
-    const FN(spiking_t_) ctrl = {w, v0, u0, z0, iconst, w_out, rest, sigma, keys, n, padded_size(n), window, substeps,
-                                 decoder, settle, gain, dt, a, b, c, d, vpeak, period_s, action_max, threshold, syn, syn_k};
+/* What every loop shares, from the entry point's io. */
+static FN(plant_t_) FN(plant_of_)(const episodes_io *io) {
+    const FN(plant_t_) plant = {(native_step_fn)io->step_fn, (native_observe_fn)io->observe_fn, io->plant_params,
+                                (const unsigned char *)io->starts, io->width * io->plant_bytes, io->width,
+                                io->start_rows, io->episodes, io->n_obs, io->n_act, io->max_steps, io->rows,
+                                (const T *)io->offset, (const T *)io->scale, io->coding, io->clip, io->n_in,
+                                io->returns, io->steps};
+    return plant;
+}
+
+int64_t FN(episodes_spiking_)(const episodes_io *io, const spiking_params *sp) {
+    const FN(plant_t_) plant = FN(plant_of_)(io);
+    const FN(spiking_t_) ctrl = {(const T *)sp->w, (const T *)sp->v0, (const T *)sp->u0, (const T *)sp->z0,
+                                 (const T *)sp->iconst, (const T *)sp->w_out, (const T *)sp->rest,
+                                 (const T *)sp->sigma, sp->keys, sp->n, padded_size(sp->n), sp->window,
+                                 sp->substeps, sp->decoder, sp->settle, (T)sp->gain, (T)sp->dt, (T)sp->a, (T)sp->b,
+                                 (T)sp->c, (T)sp->d, (T)sp->vpeak, sp->period_s, sp->action_max, sp->threshold,
+                                 sp->syn, sp->syn_k};
+    const int64_t window = sp->window, substeps = sp->substeps, n_in = io->n_in, rows = io->rows;
+    int64_t *error = io->error;
+    const int threads = io->threads;
     const FN(plant_t_) *p = &plant;
     int64_t next_row = 0;
     error[0] = error[1] = error[2] = 0;
@@ -390,17 +396,13 @@ int64_t FN(episodes_spiking_)(const void *step_fn, const void *observe_fn, const
     return error[0];
 }
 
-int64_t FN(episodes_sigmoid_)(const void *step_fn, const void *observe_fn, const double *plant_params,
-                              int64_t plant_bytes, int64_t width, const void *starts, int64_t start_rows, int64_t episodes,
-                              int64_t n_obs, int64_t n_act, int64_t max_steps, const T *offset, const T *scale,
-                              int64_t coding, int64_t clip, int64_t n_in,
-                              const T *w, int64_t n, int64_t n_bias, T slope, int64_t updates, int64_t first_output,
-                              int64_t decoder, double action_max, int64_t settle, int64_t rows, double *returns,
-                              int64_t *steps, int64_t *error, int threads) {
-    const FN(plant_t_) plant = {(native_step_fn)step_fn, (native_observe_fn)observe_fn, plant_params,
-                                (const unsigned char *)starts, width * plant_bytes, width, start_rows, episodes, n_obs, n_act,
-                                max_steps, rows, offset, scale, coding, clip, n_in, returns, steps};
-    const FN(sigmoid_t_) ctrl = {w, n, n_bias, updates, first_output, decoder, settle, slope, action_max};
+int64_t FN(episodes_sigmoid_)(const episodes_io *io, const sigmoid_params *sp) {
+    const FN(plant_t_) plant = FN(plant_of_)(io);
+    const FN(sigmoid_t_) ctrl = {(const T *)sp->w, sp->n, sp->n_bias, sp->updates, sp->first_output, sp->decoder,
+                                 sp->settle, (T)sp->slope, sp->action_max};
+    const int64_t n = sp->n, rows = io->rows;
+    int64_t *error = io->error;
+    const int threads = io->threads;
     const FN(plant_t_) *p = &plant;
     int64_t next_row = 0;
     error[0] = error[1] = error[2] = 0;

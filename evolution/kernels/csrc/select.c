@@ -45,11 +45,15 @@ static inline int64_t pick_rank(double u, int64_t n) { /* (u * n).long().clamp_m
     return k < 0 ? 0 : k;
 }
 /* reproduce's selection, run by run. survivors[R, S], counts[R, S] (offspring per slot). */
-void select_parents(const double *fitness, const int64_t *species, const uint8_t *survivors,
-                    const int64_t *counts, const int64_t *keys, const int64_t *base, int64_t R, int64_t P,
-                    int64_t S, double survival, int survival_neatc, int64_t elitism, int64_t elitism_min, double inter_prob,
-                    double cross_prob, int64_t *first, int64_t *second, uint8_t *do_cross, uint8_t *elite,
-                    const uint8_t *champions, int threads) {
+void select_parents(const select_params *cfg, const select_parents_io *io) {
+    const double *fitness = io->fitness;
+    const double survival = cfg->survival, inter_prob = cfg->inter_prob, cross_prob = cfg->cross_prob;
+    const int64_t *species = io->species, *counts = io->counts, *keys = io->keys, *base = io->base;
+    const uint8_t *survivors = io->survivors, *champions = io->champions;
+    const int64_t R = io->R, P = io->P, S = io->S, elitism = cfg->elitism, elitism_min = cfg->elitism_min;
+    const int survival_neatc = cfg->survival_neatc, threads = io->threads;
+    int64_t *first = io->first, *second = io->second;
+    uint8_t *do_cross = io->do_cross, *elite = io->elite;
     _Pragma("omp parallel for schedule(static) num_threads(threads)")
     for (int64_t r = 0; r < R; ++r) {
         const double *f = fitness + r * P;
@@ -117,11 +121,14 @@ void select_parents(const double *fitness, const int64_t *species, const uint8_t
    a tie), its conn/weight/sigma rows copied; slots without members zeroed. runs: the genomes are
    those runs of a larger population. */
 #define DEFINE_REPS(T, SFX)                                                                       \
-void choose_representatives_##SFX(const int64_t *species, const uint8_t *conn, const T *weight,  \
-                                  const T *sigma, const int64_t *runs, const int64_t *keys,        \
-                                  const int64_t *base, int64_t R, int64_t P, int64_t S, int64_t NN,\
-                                  uint8_t *alive,                                                  \
-                                  uint8_t *rep_conn, T *rep_weight, T *rep_sigma, int threads) {   \
+void choose_representatives_##SFX(const reps_io *io) {                                           \
+    const int64_t *species = io->species, *runs = io->runs, *keys = io->keys, *base = io->base;  \
+    const uint8_t *conn = io->conn;                                                               \
+    const T *weight = (const T *)io->weight, *sigma = (const T *)io->sigma;                      \
+    const int64_t R = io->R, P = io->P, S = io->S, NN = io->NN;                                   \
+    const int threads = io->threads;                                                              \
+    uint8_t *alive = io->alive, *rep_conn = io->rep_conn;                                         \
+    T *rep_weight = (T *)io->rep_weight, *rep_sigma = (T *)io->rep_sigma;                         \
     _Pragma("omp parallel for schedule(static) num_threads(threads)")                             \
     for (int64_t r = 0; r < R; ++r) {                                                             \
         const uint64_t key = (uint64_t)keys[r], b0 = (uint64_t)base[r];                          \
@@ -178,14 +185,20 @@ static void rank_living(const uint8_t *al, const double *sf, int64_t S, int64_t 
    the species_elitism best species protected (stable descending order), stagnant species removed
    or penalised, then offspring by explicit fitness sharing and largest remainder, then the run's
    record and delta coding. The shares' total is summed in slot order, as the reference's cumsum. */
-void species_offspring(const double *fitness, const int64_t *species, const uint8_t *alive,
-                       const double *best_in, const int64_t *last_in, const int64_t *created,
-                       const uint8_t *obl_in, const double *run_best_in, const int64_t *run_stale_in,
-                       int64_t R, int64_t P, int64_t S, int64_t generation, int64_t max_stagnation,
-                       int64_t species_elitism, double penalty, int64_t obliterate_interval,
-                       int64_t obliterate_min_age, int64_t pop_stagnation, int64_t clock_before,
-                       double *best_out, int64_t *last_out, uint8_t *obl_out, double *run_best_out,
-                       int64_t *run_stale_out, uint8_t *survivors, int64_t *counts, uint8_t *delta, int threads) {
+void species_offspring(const select_params *cfg, const offspring_io *io) {
+    const double *fitness = io->fitness, *best_in = io->best_in, *run_best_in = io->run_best_in;
+    const int64_t *species = io->species, *last_in = io->last_in, *created = io->created;
+    const int64_t *run_stale_in = io->run_stale_in;
+    const uint8_t *alive = io->alive, *obl_in = io->obl_in;
+    const int64_t R = io->R, P = io->P, S = io->S, generation = io->generation;
+    const int64_t max_stagnation = cfg->max_stagnation, species_elitism = cfg->species_elitism;
+    const int64_t obliterate_interval = cfg->obliterate_interval, obliterate_min_age = cfg->obliterate_min_age;
+    const int64_t pop_stagnation = cfg->pop_stagnation, clock_before = cfg->clock_before;
+    const double penalty = cfg->penalty;
+    const int threads = io->threads;
+    double *best_out = io->best_out, *run_best_out = io->run_best_out;
+    int64_t *last_out = io->last_out, *run_stale_out = io->run_stale_out, *counts = io->counts;
+    uint8_t *obl_out = io->obl_out, *survivors = io->survivors, *delta = io->delta;
     _Pragma("omp parallel for schedule(static) num_threads(threads)")
     for (int64_t r = 0; r < R; ++r) {
         const double *f = fitness + r * P;
