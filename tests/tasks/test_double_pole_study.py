@@ -367,6 +367,30 @@ def test_min_general_is_the_generalisation_starts_a_dpnv_solution_must_hold(monk
         study_solved("dpv", "sigmoid", study_config("dpv", "sigmoid"), min_general=300)
 
 
+def test_only_the_champions_that_hold_the_long_balance_take_the_625_starts(monkeypatch):
+    """The generalisation starts run for the champions that balanced the 100,000 steps and no
+    other: a champion that fell is reported as not run (-1), whatever it would have held."""
+    import tasks.studies.double_pole as dp
+
+    long_steps = torch.tensor([100_000, 50, 100_000, 7])  # runs 0 and 2 hold the long balance
+    general_rows = []
+
+    def balanced(champions, config, spec=None, *, velocities=False, max_steps=None, starts=None, task=None):
+        tag = champions.weight.flatten(1)[:, 0]  # each run's own mark, to see which runs arrive
+        if starts is None:
+            return long_steps[tag.long()].view(-1, 1, 1)
+        general_rows.append(tag.long().tolist())
+        return (torch.arange(starts.shape[0]) < 100 * (tag.long() + 1).view(-1, 1)).long().mul(1000).unsqueeze(1)
+
+    monkeypatch.setattr(dp, "balanced_steps", balanced)
+    cfg = study_config("dpnv", "sigmoid", pop_size=6)
+    champions = NEAT(cfg, seeds=[0, 1, 2, 3]).ask().gather(torch.zeros(4, 1, dtype=torch.long))
+    champions.weight.view(4, -1)[:, 0] = torch.arange(4, dtype=champions.weight.dtype)
+    solved, held = dp.champions_test(champions, cfg, min_general=250)
+    assert general_rows == [[0, 2]]
+    assert held.tolist() == [100, -1, 300, -1] and solved.tolist() == [False, False, True, False]
+
+
 def test_reproduce_dpnv_with_min_general_records_it_and_resumes_only_with_it(tmp_path):
     kw = dict(progress=False, setup="neat-2002", ga="neat-1.2.1-dpnv-per-gene", coding="signed")
     out = tmp_path / "m300"
