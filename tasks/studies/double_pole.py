@@ -239,12 +239,10 @@ def champions_test(champions, config, spec=None, *, velocities: bool = False,
                           task=task)[:, 0, 0]
     solved = long >= long_steps
     held = torch.full_like(long, -1)
-    passed = torch.nonzero(solved).flatten()
-    if passed.numel():  # the 625 starts only for the champions that held (each row's steps are its own)
-        general = (balanced_steps(champions.select_runs(passed.to(champions.device)), config, spec,
-                                  velocities=velocities, starts=generalization_starts(),
-                                  task=task) >= GENERALIZATION_STEPS).sum(-1)[:, 0]
-        held = held.index_copy(0, passed.to(held.device), general.to(held.device))
+    if bool(solved.any()):  # the 625 starts only for the champions that held (each row's steps are its own)
+        general = (balanced_steps(champions.select_runs(solved), config, spec, velocities=velocities,
+                                  starts=generalization_starts(), task=task) >= GENERALIZATION_STEPS).sum(-1)[:, 0]
+        held = held.masked_scatter(solved, general)
         solved = solved & (held >= min_general)
     return solved, held
 
