@@ -63,7 +63,7 @@ from snn_torch.modules.coding import (
 from snn_torch.modules.recurrent import PopulationRecurrentIzhikevich, PopulationRecurrentSigmoid
 
 __all__ = ["SpikingSpec", "SigmoidSpec", "SpikingController", "SigmoidController", "SpikingState",
-           "SigmoidState", "rest_rate_hz", "used_slots", "local_slots", "NEAT_SIGMOID_SLOPE", "ENCODERS", "SPIKING_DECODERS",
+           "SigmoidState", "rest_rate_hz", "rest_cycle", "spread_phases", "used_slots", "local_slots", "NEAT_SIGMOID_SLOPE", "ENCODERS", "SPIKING_DECODERS",
            "SIGMOID_DECODERS", "make_controller", "spiking_config", "SPIKING_SIGMA", "sigmoid_config", "task_config",
            "as_spec", "spec_name", "check_controller_config", "CONTROLLERS", "CONTROLLER_NAMES", "register_controller",
            "network_inputs"]
@@ -77,6 +77,34 @@ def rest_rate_hz(neuron: IzhikevichParams, current: float, dt_ms: float) -> floa
     z, _ = izhikevich_run(torch.full((steps, 1), float(current), dtype=torch.float64),
                           IzhikevichState(v, u), neuron, dt_ms=dt_ms)
     return float(z[steps // 3:].sum()) / 2.0
+
+
+@functools.lru_cache(maxsize=32)
+def rest_cycle(neuron: IzhikevichParams, current: float, dt_ms: float) -> tuple[Tensor, Tensor]:
+    """One neuron's states under a constant ``current`` (mV/ms) after 1 s of settling: ``v`` (mV)
+    and ``u`` (mV/ms), float64 ``[K]``, at ``K`` consecutive substeps spanning one interspike
+    interval (``K = 1`` where it does not fire). Integrated as the networks are."""
+    settle = int(round(1000.0 / dt_ms))
+    v, u = izhikevich_init((1,), neuron, dtype=torch.float64)
+    drive = torch.full((settle, 1), float(current), dtype=torch.float64)
+    _, state = izhikevich_run(drive, IzhikevichState(v, u), neuron, dt_ms=dt_ms)
+    rate = rest_rate_hz(neuron, current, dt_ms)
+    k = 1 if rate <= 0.0 else max(1, int(round(1000.0 / (rate * dt_ms))))
+    vs, us = [state.v], [state.u]
+    for _ in range(k - 1):
+        _, state = izhikevich_run(drive[:1], state, neuron, dt_ms=dt_ms)
+        vs.append(state.v)
+        us.append(state.u)
+    return torch.cat(vs), torch.cat(us)
+
+
+def spread_phases(slots: Tensor, k: int) -> Tensor:
+    """Each node slot's point (an index below ``k``) in its neuron's firing cycle at the start:
+    the fractional part of ``slot`` times the golden ratio, so neighbouring slots lie apart and
+    a node starts at the same point in any batch. ``slots`` < 0 (padding) get 0."""
+    golden = (5 ** 0.5 - 1) / 2
+    phase = torch.remainder(slots.clamp(min=0).to(torch.float64) * golden, 1.0)
+    return (phase * k).floor().to(torch.int64).clamp(max=k - 1)
 
 
 # The decoder gain sigma scales sum_i w_i r_i (Hz): 0.005 keeps a sigmoid force off saturation at
@@ -295,6 +323,11 @@ class SpikingController(_Phenotype):
             # The genome's full weights: the same key in any batch, whatever slots it simulates.
             self.keys = fnv1a_keys(genomes.effective_weight().reshape(-1, N, N))
         self.window = RateWindow(spec.rate_window_steps, period_s)
+        self._start = None  # "spread": each local node's (v, u) at the start, [G, n]
+        if spec.start == "spread":
+            cycle_v, cycle_u = rest_cycle(spec.neuron, spec.i_background, spec.dt_ms)
+            at = spread_phases(self.node_slots, cycle_v.numel())
+            self._start = (cycle_v.to(at.device)[at].to(self.weight.dtype), cycle_u.to(at.device)[at].to(self.weight.dtype))
         self.rest = None
         if spec.rest_relative:
             rest = torch.full((n,), rest_rate_hz(spec.neuron, spec.i_background, spec.dt_ms), dtype=torch.float64)
@@ -321,6 +354,10 @@ class SpikingController(_Phenotype):
         B, n = network.shape[0], self.num_local
         v = torch.empty(B, n, dtype=self.weight.dtype, device=self.weight.device)
         neurons = self.network.initial_state(v)
+        if self._start is not None:
+            start_v, start_u = self._start
+            neurons = neurons._replace(v=start_v.to(network.device)[network].contiguous(),
+                                       u=start_u.to(network.device)[network].contiguous())
         keys = None if self.keys is None else self.keys.to(network.device)[network]
         return SpikingState(network, neurons, self.window.initial_state(v), self.w_out[network], self.sigma[network],
                             keys)

@@ -8,6 +8,7 @@ the specs a task gets by default.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -45,9 +46,10 @@ SIGMOID_DECODERS = {
     "bang_bang": lambda a_max, spec: BangBang(a_max, threshold=0.5),
 }
 DECODER_CODES = {"sigmoid_force": 0, "bang_bang": 1, "linear": 2}  # the C decoders' (recurrent_izhikevich.h, episodes.h)
+SPIKING_STARTS = ("rest", "spread")  # SpikingSpec.start
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class SpikingSpec:
     """A spiking controller's physics and coding, in one place. Defaults: the choices made for
     Qiu et al.'s non-Markov cart-pole (the paper gives none of these values).
@@ -92,6 +94,11 @@ class SpikingSpec:
             middle: a current below the background's under the middle; not with the Bernoulli
             encoder) or ``"push_pull"`` (two input nodes per variable, the positive and the
             negative part of the signed value); ``clip_inputs``: clip the signed value to [-1, 1].
+        start: each episode's first network state. ``"rest"`` (the paper's): every neuron at
+            ``v0`` (-65 mV), so all fire their first spikes together and, through strong
+            synapses, jolt the first control steps' actions. ``"spread"``: each neuron at a point
+            of its firing cycle under the background current alone, the point set by its node
+            slot (the same in any batch), so the network starts as it runs.
     """
 
     neuron: IzhikevichParams = QIU2019
@@ -109,9 +116,12 @@ class SpikingSpec:
     threshold: float = 0.0
     input_coding: str = "unit"
     clip_inputs: bool = True
+    start: str = "rest"
 
     def __post_init__(self) -> None:
         check_coding("SpikingSpec", self.input_coding, self.clip_inputs)
+        if self.start not in SPIKING_STARTS:
+            raise ValueError(f"SpikingSpec.start must be one of {SPIKING_STARTS}, got {self.start!r}")
         if self.encoder == "bernoulli" and self.input_coding == "signed":
             raise ValueError("SpikingSpec.input_coding='signed' cannot drive the Bernoulli encoder (a spike "
                              "probability is not negative): use 'push_pull'")
@@ -146,6 +156,12 @@ class SpikingSpec:
     def period_s(self, task_period_s: float) -> float:
         """Network time per control step (s) on a task whose control period is ``task_period_s``."""
         return task_period_s if self.network_ms is None else self.network_ms / 1000.0
+
+    def __repr__(self) -> str:
+        # ``start`` only where it is not the default, so a spec's repr (a checkpoint's identity
+        # of `snn-neat evolve`) reads as it did before the field existed
+        shown = [f for f in dataclasses.fields(self) if f.name != "start" or self.start != "rest"]
+        return f"SpikingSpec({', '.join(f'{f.name}={getattr(self, f.name)!r}' for f in shown)})"
 
     def substeps(self, period_s: float) -> int:
         """Substeps of ``dt_ms`` in a control period of ``period_s`` seconds (a whole number)."""

@@ -66,6 +66,9 @@ SPIKING_SPECS = {
     "paper table1 (bernoulli, bang-bang, rest-relative)": PAPER_SPECS[("table1", "snn")],
     "linear decoder, window 2": SpikingSpec(decoder="linear", rate_window_steps=2),
     "bang-bang above a threshold": SpikingSpec(decoder="bang_bang", threshold=25.0),
+    "the library's task default (signed, synapses over 10 ms, spread start)": SpikingSpec(
+        input_coding="signed", rate_window_steps=3, rest_relative=True, synapse_kick_mv=30.0, synapse_tau_ms=10.0,
+        start="spread"),
 }
 
 
