@@ -323,11 +323,10 @@ class SpikingController(_Phenotype):
             # The genome's full weights: the same key in any batch, whatever slots it simulates.
             self.keys = fnv1a_keys(genomes.effective_weight().reshape(-1, N, N))
         self.window = RateWindow(spec.rate_window_steps, period_s)
-        self._start = None  # "spread": each local node's (v, u) at the start, [G, n]
+        self._start = None  # "spread": each local node's v and u at the start, [2, G, n]
         if spec.start == "spread":
-            cycle_v, cycle_u = rest_cycle(spec.neuron, spec.i_background, spec.dt_ms)
-            at = spread_phases(self.node_slots, cycle_v.numel())
-            self._start = (cycle_v.to(at.device)[at].to(self.weight.dtype), cycle_u.to(at.device)[at].to(self.weight.dtype))
+            cycle = torch.stack(rest_cycle(spec.neuron, spec.i_background, spec.dt_ms)).to(self.weight)  # [2, K]
+            self._start = cycle[:, spread_phases(self.node_slots, cycle.shape[1])]
         self.rest = None
         if spec.rest_relative:
             rest = torch.full((n,), rest_rate_hz(spec.neuron, spec.i_background, spec.dt_ms), dtype=torch.float64)
@@ -355,9 +354,7 @@ class SpikingController(_Phenotype):
         v = torch.empty(B, n, dtype=self.weight.dtype, device=self.weight.device)
         neurons = self.network.initial_state(v)
         if self._start is not None:
-            start_v, start_u = self._start
-            neurons = neurons._replace(v=start_v.to(network.device)[network].contiguous(),
-                                       u=start_u.to(network.device)[network].contiguous())
+            neurons = neurons._replace(v=self._start[0][network], u=self._start[1][network])
         keys = None if self.keys is None else self.keys.to(network.device)[network]
         return SpikingState(network, neurons, self.window.initial_state(v), self.w_out[network], self.sigma[network],
                             keys)
