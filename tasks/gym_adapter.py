@@ -28,8 +28,11 @@ How the adapter maps onto the seam's functional protocol:
   environment reset with its seed); the rollout copies each episode's state to every genome,
   so every genome faces the same starts, and the first ``step`` gives each row its own
   environment, reset with the same seed, so it starts where ``reset`` said.
-- Observations are normalised by the seam over the observation space's bounds; infinite bounds
-  (CartPole's velocities) must be given as ``observation_bounds`` (for the port too).
+- Observations are normalised by the seam over the observation space's bounds. A space that is
+  not a flat ``Box`` is flattened as gymnasium flattens it (``Discrete(n)``: n one-hot values;
+  ``Tuple`` and ``Dict``: their parts side by side). Where a variable is unbounded (CartPole's
+  velocities) and no ``observation_bounds`` are given, a port uses its own bounds and the adapter
+  estimates them from 8 episodes of random actions (``estimate_bounds``).
 - Actions: a ``Discrete(n)`` space takes one continuous output in ``[-1, 1]`` split into ``n``
   equal bins (``n = 2``: push left below 0, right above; ``discrete_action``, which the ports
   use too); a ``Box`` space takes its shape's outputs, scaled to its symmetric bound.
@@ -108,19 +111,66 @@ def port_options(task: str, observation_bounds: Bounds | None, default: Bounds, 
     return low, high, max_steps, float(control_period_s)
 
 
-def _space_bounds(name: str, obs_space, observation_bounds: Bounds | None) -> tuple[np.ndarray, np.ndarray]:
-    """The observation bounds the adapter uses (the Box space's, or ``observation_bounds``); a
-    ``TaskError`` where they are infinite or of the wrong length."""
+ESTIMATE_EPISODES = 8  # random-action episodes that estimate an unbounded variable's range
+ESTIMATE_STEPS = 1000  # control steps of each at most
+ESTIMATE_SEED = 0  # their seed: the same bounds every time
+
+
+def flat_space(name: str, obs_space):
+    """The flat ``Box`` the observations are coded over: ``obs_space`` itself where it is one,
+    else gymnasium's ``flatten_space`` of it (a ``Discrete(n)`` becomes n one-hot variables in
+    [0, 1]; ``Tuple``, ``Dict``, ``MultiDiscrete`` and ``MultiBinary`` concatenate theirs); a
+    ``TaskError`` for a space gymnasium cannot flatten (``Text``, ``Graph``, ``Sequence``)."""
     gym = _gymnasium()
-    if not isinstance(obs_space, gym.spaces.Box) or len(obs_space.shape) != 1:
-        raise TaskError(f"task {name!r}: needs a flat Box observation space, got {obs_space}")
-    low, high = (np.asarray(b, dtype=np.float64) for b in (observation_bounds or (obs_space.low, obs_space.high)))
-    if low.shape != obs_space.shape or high.shape != obs_space.shape:
-        raise TaskError(f"task {name!r}: observation_bounds must give {obs_space.shape[0]} lows and highs")
-    infinite = [k for k in range(low.shape[0]) if not (math.isfinite(low[k]) and math.isfinite(high[k]))]
-    if infinite:
-        raise TaskError(f"task {name!r}: observation variables {infinite} have infinite bounds in "
-                        f"{obs_space}; pass observation_bounds=(low, high)")
+    if isinstance(obs_space, gym.spaces.Box) and len(obs_space.shape) == 1:
+        return obs_space
+    try:
+        flat = gym.spaces.flatten_space(obs_space)
+    except (NotImplementedError, TypeError, ValueError) as exc:
+        raise TaskError(f"task {name!r}: cannot code the observation space {obs_space} as numbers ({exc})") from None
+    if not (isinstance(flat, gym.spaces.Box) and len(flat.shape) == 1):
+        raise TaskError(f"task {name!r}: the observation space {obs_space} does not flatten to one vector")
+    return flat
+
+
+def estimate_bounds(make_env, flatten, low: np.ndarray, high: np.ndarray, max_steps: int) -> tuple[
+        np.ndarray, np.ndarray]:
+    """``(low, high)`` with each infinite bound replaced from what ``ESTIMATE_EPISODES`` episodes
+    of uniformly random actions (seeded ``ESTIMATE_SEED``, at most ``min(max_steps,
+    ESTIMATE_STEPS)`` steps each) observe: the middle of the 1st to 99th percentile of each
+    variable, plus or minus twice their half-distance (a controller that acts well may go where
+    random actions do not; beyond the bounds the coding saturates), at least 1 where a variable
+    barely moved. ``make_env(seed)`` gives ``(env, its first observation as a vector)``;
+    ``flatten(observation)`` makes a step's observation that vector."""
+    seen = []
+    for episode in range(ESTIMATE_EPISODES):
+        env, obs = make_env(ESTIMATE_SEED + episode)
+        env.action_space.seed(ESTIMATE_SEED + episode)
+        seen.append(obs)
+        for _ in range(min(max_steps, ESTIMATE_STEPS)):
+            obs, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            seen.append(flatten(obs))
+            if terminated or truncated:
+                break
+        env.close()
+    values = np.stack(seen)
+    lo_q, hi_q = np.quantile(values, 0.01, axis=0), np.quantile(values, 0.99, axis=0)
+    middle, spread = (lo_q + hi_q) / 2.0, hi_q - lo_q
+    half = np.where(spread < 1.0e-3 * np.maximum(1.0, np.abs(middle)), 1.0, spread)  # twice the half-distance
+    given_low, given_high = np.isfinite(low), np.isfinite(high)
+    low, high = np.where(given_low, low, middle - half), np.where(given_high, high, middle + half)
+    # one side given and the estimate of the other not past it: open the estimated side 2 half past it
+    low = np.where(~given_low & (low >= high), high - 2.0 * half, low)
+    high = np.where(~given_high & (high <= low), low + 2.0 * half, high)
+    return low, high
+
+
+def _given_bounds(name: str, flat, observation_bounds: Bounds | None) -> tuple[np.ndarray, np.ndarray]:
+    """The bounds of ``flat`` (a flat Box), or ``observation_bounds`` in their place: a
+    ``TaskError`` where the latter give the wrong number; infinite bounds are left as they are."""
+    low, high = (np.asarray(b, dtype=np.float64) for b in (observation_bounds or (flat.low, flat.high)))
+    if low.shape != flat.shape or high.shape != flat.shape:
+        raise TaskError(f"task {name!r}: observation_bounds must give {flat.shape[0]} lows and highs")
     return low, high
 
 
@@ -131,8 +181,10 @@ class GymTask(Task):
     Args:
         env_id: the registered id, e.g. ``"CartPole-v1"``, ``"Pendulum-v1"``.
         adapter: True to step gymnasium's own environments even where a port exists.
-        observation_bounds: ``(low, high)`` sequences replacing the observation space's bounds
-            (needed where those are infinite).
+        observation_bounds: ``(low, high)`` sequences replacing the observation space's bounds.
+            Where the space leaves a variable unbounded and none are given, a port uses its own
+            bounds for it and the adapter estimates them (``estimate_bounds``; the variables in
+            ``estimated_bounds``).
         max_steps: episode length (default: the environment's ``max_episode_steps``, else 1000).
         control_period_s: network time per step (s; spiking controllers run
             ``control_period_s / dt`` substeps); default: the port's (its environment's step
@@ -152,13 +204,18 @@ class GymTask(Task):
         probe = _gymnasium().make(env_id, **make_kwargs)
         space = probe.observation_space
         probe.close()
-        low, high = _space_bounds(f"gym:{env_id}", space, observation_bounds)  # as the adapter's, so both agree
+        port_class = getattr(importlib.import_module(module), class_name)
+        # the space's bounds (as the adapter's, so both paths code alike); the port's where infinite
+        low, high = _given_bounds(f"gym:{env_id}", flat_space(f"gym:{env_id}", space), observation_bounds)
+        own = port_class()
+        low = np.where(np.isfinite(low), low, np.asarray(own.observation_low, dtype=np.float64))
+        high = np.where(np.isfinite(high), high, np.asarray(own.observation_high, dtype=np.float64))
         options = {"observation_bounds": (tuple(low.tolist()), tuple(high.tolist())), **make_kwargs}
         if max_steps is not None:
             options["max_steps"] = max_steps
         if control_period_s is not None:
             options["control_period_s"] = control_period_s
-        task = getattr(importlib.import_module(module), class_name)(**options)
+        task = port_class(**options)
         if not hasattr(task, "discrete"):  # the adapter's attribute, on every task GymTask returns
             task.discrete = 0
         return task
@@ -172,8 +229,9 @@ class GymTask(Task):
         obs_space, act_space = probe.observation_space, probe.action_space
         spec_steps = probe.spec.max_episode_steps if probe.spec is not None else None
         probe.close()
-        low, high = _space_bounds(self.name, obs_space, observation_bounds)
-        self.observation_low, self.observation_high = tuple(low.tolist()), tuple(high.tolist())
+        flat = flat_space(self.name, obs_space)
+        self._space = None if flat is obs_space else obs_space  # None: observations are vectors already
+        low, high = _given_bounds(self.name, flat, observation_bounds)
         if isinstance(act_space, gym.spaces.Discrete):
             self.discrete, self.action_size, self.action_max = int(act_space.n), 1, 1.0
         elif isinstance(act_space, gym.spaces.Box) and len(act_space.shape) == 1 and \
@@ -187,12 +245,24 @@ class GymTask(Task):
         self.max_steps = int(max_steps if max_steps is not None else spec_steps or 1000)
         self.control_period_s = float(0.02 if control_period_s is None else control_period_s)
         self._envs: list = []
+        # variables the space leaves unbounded: their range as random actions see it
+        self.estimated_bounds = [k for k in range(low.shape[0]) if not (math.isfinite(low[k]) and math.isfinite(high[k]))]
+        if self.estimated_bounds:
+            low, high = estimate_bounds(self._make, self._vector, low, high, self.max_steps)
+        self.observation_low, self.observation_high = tuple(low.tolist()), tuple(high.tolist())
         self.validate()
+
+    def _vector(self, obs) -> np.ndarray:
+        """An observation as the float64 vector the controllers see (flattened where the space is
+        not a flat Box)."""
+        if self._space is not None:
+            obs = _gymnasium().spaces.flatten(self._space, obs)
+        return np.asarray(obs, dtype=np.float64)
 
     def _make(self, seed: int):
         env = _gymnasium().make(self.env_id, **self.make_kwargs)
         obs, _ = env.reset(seed=seed)
-        return env, np.asarray(obs, dtype=np.float64)
+        return env, self._vector(obs)
 
     def reset(self, batch: int, generator: torch.Generator | None = None, *, device: torch.device | str = "cpu",
               dtype: torch.dtype = torch.float32) -> Tensor:
@@ -226,7 +296,7 @@ class GymTask(Task):
                 self._envs.append(env)
                 new[r, _ENV] = len(self._envs) - 1
             obs, rew, terminated, truncated, _ = self._envs[int(new[r, _ENV])].step(self._action(actions[r]))
-            new[r, _OBS:] = torch.from_numpy(np.asarray(obs, dtype=np.float64))
+            new[r, _OBS:] = torch.from_numpy(self._vector(obs))
             reward[r] = float(rew)
             if terminated or truncated:
                 new[r, _DONE] = 1.0

@@ -3,8 +3,8 @@
 * A gymnasium id (``CartPole-v1``, ``Pendulum-v1``, ...): ``tasks.gym_adapter.GymTask(env_id)``,
   the batched torch port where there is one, gymnasium's own environment (the adapter)
   otherwise. Where gymnasium's observation space leaves a variable unbounded (CartPole-v1's
-  velocities), a port's own bounds for it are used; the adapter has none to offer, so such an
-  environment needs a task of one's own. The threshold is gymnasium's ``reward_threshold``
+  velocities), a port's own bounds for it are used, and the adapter estimates them from
+  random-action episodes (``tasks.gym_adapter.estimate_bounds``). The threshold is gymnasium's ``reward_threshold``
   (None where the environment has none, e.g. Pendulum-v1).
 * ``module:Class`` (``Class`` a Python name, dots for nested classes): a subclass of
   ``evolution.Task`` in an importable module (the current folder is searched first, as
@@ -108,21 +108,6 @@ def load_task(text: str) -> Task:
     return task
 
 
-def _port_bounds(env_id: str, space) -> tuple[tuple[float, ...], tuple[float, ...]] | None:
-    """For a port whose gymnasium space has infinite bounds: the space's bounds where finite,
-    the port's own elsewhere; None where the space's bounds are all finite."""
-    from tasks.gym_adapter import PORTS
-
-    low, high = [float(v) for v in space.low], [float(v) for v in space.high]
-    if all(math.isfinite(v) for v in low + high):
-        return None
-    module, class_name, _ = PORTS[env_id]
-    port = getattr(importlib.import_module(module), class_name)()
-    low = [v if math.isfinite(v) else float(p) for v, p in zip(low, port.observation_low, strict=True)]
-    high = [v if math.isfinite(v) else float(p) for v, p in zip(high, port.observation_high, strict=True)]
-    return tuple(low), tuple(high)
-
-
 # Thresholds gymnasium does not register but the field uses: Pendulum-v1's -200 (gymnax-blines'
 # and the issue tracker's criterion for a swing-up that holds the pendulum up).
 UNREGISTERED_THRESHOLDS = {"Pendulum-v1": -200.0}
@@ -136,7 +121,7 @@ def gym_task(env_id: str) -> tuple[Task, float | None]:
         raise EnvError(f"{env_id!r} reads as a gymnasium id, but gymnasium is not installed: pip install "
                        "'snn-neat[gym]', or name your own task as module:Class") from None
     from evolution.task import TaskError
-    from tasks.gym_adapter import PORTS, GymTask
+    from tasks.gym_adapter import GymTask
 
     try:
         spec = gymnasium.spec(env_id)
@@ -145,14 +130,7 @@ def gym_task(env_id: str) -> tuple[Task, float | None]:
                        "CartPole-v1, or your own task as module:Class") from None
     threshold = spec.reward_threshold if spec.reward_threshold is not None else UNREGISTERED_THRESHOLDS.get(env_id)
     try:
-        options = {}
-        if env_id in PORTS:
-            probe = gymnasium.make(env_id)
-            bounds = _port_bounds(env_id, probe.observation_space)
-            probe.close()
-            if bounds is not None:
-                options["observation_bounds"] = bounds
-        task = GymTask(env_id, **options)
+        task = GymTask(env_id)
     except (gymnasium.error.DependencyNotInstalled, ImportError) as exc:
         raise EnvError(f"gymnasium's {env_id} needs a package that is not installed here ({exc}): install it, "
                        "or choose another ENV") from None

@@ -1,12 +1,14 @@
 """gymnasium environments as tasks of the seam."""
 
+import numpy as np
 import pytest
 import torch
 
 gym = pytest.importorskip("gymnasium")
 
 from evolution import NEAT, NEATConfig, TaskError, TaskFitness, make_controller, rollout, spiking_config  # noqa: E402
-from tasks.gym_adapter import GymTask  # noqa: E402
+from tasks.gym_adapter import GymTask, estimate_bounds, flat_space  # noqa: E402
+from tasks.gym_cartpole import GymCartPoleTask  # noqa: E402
 
 CARTPOLE_BOUNDS = ((-2.4, -3.0, -0.21, -3.5), (2.4, 3.0, 0.21, 3.5))
 
@@ -43,8 +45,76 @@ def test_continuous_actions_scale_to_the_box_and_sigmoid_controllers_run_too():
     assert bool((result.steps == 30).all()) and float(result.trace["action"].abs().max()) <= 2.0
 
 
+def test_unbounded_variables_get_the_ports_bounds_or_an_estimate_from_random_actions():
+    port, own = GymTask("CartPole-v1"), GymCartPoleTask()
+    space = gym.make("CartPole-v1").observation_space
+    assert type(port) is GymCartPoleTask  # velocities: the port's bounds; the rest: the space's
+    assert port.observation_high == (float(space.high[0]), own.observation_high[1], float(space.high[2]),
+                                     own.observation_high[3])
+    adapter = GymTask("CartPole-v1", adapter=True)
+    assert adapter.estimated_bounds == [1, 3]
+    assert adapter.observation_high[0] == float(space.high[0]) and adapter.observation_low[2] == float(space.low[2])
+    assert GymTask("CartPole-v1", adapter=True).observation_high == adapter.observation_high  # seeded: the same
+    # the estimate holds what random actions see, with room to spare (twice the 1-99 % spread)
+    env = gym.make("CartPole-v1")
+    env.reset(seed=123)
+    env.action_space.seed(123)
+    seen = []
+    for _ in range(200):
+        obs, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        seen.append(obs)
+        if terminated or truncated:
+            break
+    seen = np.stack(seen)
+    for k in (1, 3):
+        assert adapter.observation_low[k] < seen[:, k].min() and seen[:, k].max() < adapter.observation_high[k]
+        assert adapter.observation_high[k] - adapter.observation_low[k] < 20.0  # not a vacuous range
+
+
+class _Scripted:
+    """An environment whose observations are given rows (random actions change nothing)."""
+
+    def __init__(self, rows):
+        self.rows, self.t = rows, 0
+        self.action_space = gym.spaces.Discrete(2)
+
+    def step(self, action):
+        self.t += 1
+        return self.rows[min(self.t, len(self.rows) - 1)], 0.0, False, self.t >= len(self.rows) - 1, {}
+
+    def close(self):
+        pass
+
+
+def test_estimate_bounds_keeps_given_sides_and_opens_still_variables():
+    rows = [np.array([3.0, 0.1 * t, 5.0 + 0.01 * t]) for t in range(101)]  # constant, 0..10, 5..6
+    low = np.array([-np.inf, 0.0, -np.inf])
+    high = np.array([np.inf, np.inf, 2.0])  # the third's given high lies below all it takes
+    lo, hi = estimate_bounds(lambda seed: (_Scripted(rows), rows[0]), np.asarray, low, high, max_steps=100)
+    assert (lo[0], hi[0]) == (2.0, 4.0)  # a variable that does not move: +-1 about its value
+    assert lo[1] == 0.0 and 10.0 < hi[1] < 20.0  # the given low kept; the high past what was seen
+    assert hi[2] == 2.0 and lo[2] < 2.0  # the given high kept; the estimate opened below it
+    assert np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))
+
+
+def test_discrete_and_tuple_observations_are_flattened_one_hot():
+    lake = GymTask("FrozenLake-v1")
+    assert (lake.observation_size, lake.discrete, lake.estimated_bounds) == (16, 4, [])
+    assert lake.observation_low == (0.0,) * 16 and lake.observation_high == (1.0,) * 16
+    starts = lake.reset(2, torch.Generator().manual_seed(0))
+    assert torch.equal(lake.observe(starts)[:, 0], torch.ones(2, dtype=torch.float64))  # the start square
+    moved, _, _ = lake.step(starts, torch.full((2, 1), 0.9))  # bin 3 of 4: up
+    seen = lake.observe(moved)
+    assert bool((seen.sum(1) == 1).all()) and bool(((seen == 0) | (seen == 1)).all())
+    cards = GymTask("Blackjack-v1")
+    assert cards.observation_size == 32 + 11 + 2
+    cfg = NEATConfig(num_inputs=16, num_outputs=1, num_bias=1, pop_size=4)
+    result = rollout(lake, make_controller(NEAT(cfg, seeds=[0]).ask(), cfg, lake, "sigmoid"), episodes=2, seed=1)
+    assert result.returns.shape == (4, 2) and bool(((result.returns == 0) | (result.returns == 1)).all())
+
+
 def test_unusable_spaces_are_named():
-    with pytest.raises(TaskError, match=r"observation variables \[1, 3\] have infinite bounds"):
-        GymTask("CartPole-v1")
     with pytest.raises(TaskError, match="observation_bounds must give 4"):
         GymTask("CartPole-v1", observation_bounds=((0.0,), (1.0,)))
+    with pytest.raises(TaskError, match=r"'seq-task': the observation space Sequence.* does not flatten to one vector"):
+        flat_space("seq-task", gym.spaces.Sequence(gym.spaces.Discrete(2)))
