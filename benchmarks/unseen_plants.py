@@ -24,7 +24,8 @@ Each threshold is the reference's mean return on 200 episodes rounded towards th
 so a run that reaches it controls about as well as the hand-made law; ``tests/
 test_unseen_plants.py`` checks that the references reach them and the zero action does not.
 Methods: ``sigmoid`` and ``snn`` are ``snn-neat evolve`` with nothing set but the plant, the
-controller and ``--generations`` (``tasks.studies.evolve_env.run_plan``); ``pgpe`` is the
+controller and a budget of ``--generations``' training episodes (``classic_control_vs_es.run_ours``);
+``pgpe`` is the
 evolution-strategy peer of ``benchmarks/classic_control_vs_es.py`` (EvoTorch's PGPE with its
 settings there, an obs-16-act tanh MLP) on the same number of training episodes, its final
 centre tested on the same 100 fresh episodes. One thread; CPU seconds are ``process_time``.
@@ -36,7 +37,6 @@ import argparse
 import math
 import statistics
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -44,12 +44,14 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # es_peers, classic_control_vs_es
 
+from classic_control_vs_es import run_ours  # noqa: E402
+
 from evolution.defaults import default_episodes  # noqa: E402
 from evolution.phenotype import task_config  # noqa: E402
 from evolution.task import Task  # noqa: E402
 
 __all__ = ["DoubleIntegrator", "LongPoleCart", "Reacher2D", "HeaterLag", "PLANTS", "REFERENCES", "zero_action",
-           "policy_returns", "main"]
+           "policy_returns", "run_pgpe", "main"]
 
 
 def _uniform(batch: int, generator: torch.Generator, half_widths: list[float]) -> torch.Tensor:
@@ -218,19 +220,6 @@ def policy_returns(task: Task, policy, episodes: int = 200, seed: int = 0) -> to
     return total
 
 
-def run_ours(plant: str, controller: str, seed: int, generations: int) -> dict:
-    """``snn-neat evolve unseen_plants:PLANT --controller C --seed S --generations G``."""
-    from tasks.studies.evolve_env import EvolvePlan, run_plan
-
-    plan = EvolvePlan(f"unseen_plants:{plant}", controller, seeds=(seed,), generations=generations)
-    with tempfile.TemporaryDirectory(prefix="unseen-") as folder:
-        runs = run_plan(plan, folder, progress=False)
-    r, built = runs.records[0], runs.built
-    return {"plant": plant, "method": controller, "seed": seed, "threshold": built.threshold,
-            "episodes": r.episodes, "cpu_s": r.cpu_s, "generation": r.confirmed_generation,
-            "test_mean": r.test_mean, "test_reaches": r.test_mean >= built.threshold}
-
-
 def run_pgpe(plant: str, seed: int, budget_episodes: int) -> dict:
     """EvoTorch's PGPE as ``benchmarks/classic_control_vs_es.py`` sets it, on ``budget_episodes``
     training episodes; its final centre tested on the 100 test episodes our runs face."""
@@ -278,11 +267,12 @@ def main(argv: list[str] | None = None) -> int:
         for method in args.methods:
             records = []
             for seed in args.seeds:
-                if method == "pgpe":  # the training episodes a NEAT run of --generations has
-                    budget = args.generations * task_config(task, "sigmoid").pop_size * default_episodes(task)
+                # the training episodes a NEAT run of --generations has
+                budget = args.generations * task_config(task, "sigmoid").pop_size * default_episodes(task)
+                if method == "pgpe":
                     records.append(run_pgpe(plant, seed, budget))
-                else:
-                    records.append(run_ours(plant, method, seed, args.generations))
+                else:  # snn-neat evolve unseen_plants:PLANT --controller METHOD --seed S --episodes BUDGET
+                    records.append(run_ours(method, f"unseen_plants:{plant}", seed, budget)[0])
             reached = sum(r["test_reaches"] for r in records)
             means = ", ".join(f"{r['test_mean']:.1f}" for r in records)
             cpu = statistics.median(r["cpu_s"] for r in records)

@@ -207,9 +207,10 @@ class GymTask(Task):
         port_class = getattr(importlib.import_module(module), class_name)
         # the space's bounds (as the adapter's, so both paths code alike); the port's where infinite
         low, high = _given_bounds(f"gym:{env_id}", flat_space(f"gym:{env_id}", space), observation_bounds)
-        own = port_class()
-        low = np.where(np.isfinite(low), low, np.asarray(own.observation_low, dtype=np.float64))
-        high = np.where(np.isfinite(high), high, np.asarray(own.observation_high, dtype=np.float64))
+        if not (np.isfinite(low).all() and np.isfinite(high).all()):
+            own = port_class()
+            low = np.where(np.isfinite(low), low, np.asarray(own.observation_low, dtype=np.float64))
+            high = np.where(np.isfinite(high), high, np.asarray(own.observation_high, dtype=np.float64))
         options = {"observation_bounds": (tuple(low.tolist()), tuple(high.tolist())), **make_kwargs}
         if max_steps is not None:
             options["max_steps"] = max_steps
@@ -246,7 +247,7 @@ class GymTask(Task):
         self.control_period_s = float(0.02 if control_period_s is None else control_period_s)
         self._envs: list = []
         # variables the space leaves unbounded: their range as random actions see it
-        self.estimated_bounds = [k for k in range(low.shape[0]) if not (math.isfinite(low[k]) and math.isfinite(high[k]))]
+        self.estimated_bounds = np.flatnonzero(~(np.isfinite(low) & np.isfinite(high))).tolist()
         if self.estimated_bounds:
             low, high = estimate_bounds(self._make, self._vector, low, high, self.max_steps)
         self.observation_low, self.observation_high = tuple(low.tolist()), tuple(high.tolist())
