@@ -245,7 +245,8 @@ class GymTask(Task):
                             f"got {act_space}")
         self.max_steps = int(max_steps if max_steps is not None else spec_steps or 1000)
         self.control_period_s = float(0.02 if control_period_s is None else control_period_s)
-        self._envs: list = []
+        self._envs: list = []  # the rollout's environments, one per row that has stepped
+        self._pool: list = []  # environments free for the next rows
         # variables the space leaves unbounded: their range as random actions see it
         self.estimated_bounds = np.flatnonzero(~(np.isfinite(low) & np.isfinite(high))).tolist()
         if self.estimated_bounds:
@@ -256,53 +257,65 @@ class GymTask(Task):
     def _vector(self, obs) -> np.ndarray:
         """An observation as the float64 vector the controllers see (flattened where the space is
         not a flat Box)."""
-        if self._space is not None:
-            obs = _gymnasium().spaces.flatten(self._space, obs)
+        space = self._space
+        if isinstance(space, _gymnasium().spaces.Discrete):  # gymnasium's flatten, without its dispatch
+            onehot = np.zeros(int(space.n), dtype=np.float64)
+            onehot[int(obs) - int(space.start)] = 1.0
+            return onehot
+        if space is not None:
+            obs = _gymnasium().spaces.flatten(space, obs)
         return np.asarray(obs, dtype=np.float64)
 
     def _make(self, seed: int):
-        env = _gymnasium().make(self.env_id, **self.make_kwargs)
+        """An environment reset with ``seed``, and its first observation as a vector: one of the
+        last rollout's where there is one (``reset(seed=...)`` starts a new episode, as gymnasium's
+        vector environments reuse theirs), else a new one."""
+        env = self._pool.pop() if self._pool else _gymnasium().make(self.env_id, **self.make_kwargs)
         obs, _ = env.reset(seed=seed)
         return env, self._vector(obs)
+
+    def __getstate__(self) -> dict:
+        # environments stay with the process that made them (a copy or another worker makes its own)
+        return {**self.__dict__, "_envs": [], "_pool": []}
 
     def reset(self, batch: int, generator: torch.Generator | None = None, *, device: torch.device | str = "cpu",
               dtype: torch.dtype = torch.float32) -> Tensor:
         """``batch`` episodes: seeds drawn from ``generator`` (below 2**31), start observations."""
-        for env in self._envs:  # a new rollout: the last one's environments are done with
-            env.close()
+        self._pool.extend(self._envs)  # a new rollout: the last one's environments are free again
         self._envs = []
         seeds = torch.randint(0, 2**31 - 1, (batch,), generator=generator, dtype=torch.int64)
         state = torch.zeros(batch, 3 + self.observation_size, dtype=torch.float64)
         state[:, _SEED], state[:, _ENV] = seeds.to(torch.float64), -1.0
+        rows = state.numpy()
         for k, seed in enumerate(seeds.tolist()):
-            env, obs = self._make(seed)
-            env.close()
-            state[k, _OBS:] = torch.from_numpy(obs)
+            env, rows[k, _OBS:] = self._make(seed)
+            self._pool.append(env)
         return state.to(device)
 
-    def _action(self, a: np.ndarray):
+    def _actions(self, a: np.ndarray) -> list:
+        """Each row's gymnasium action from ``a`` ``[B, action_size]`` (float64)."""
         if self.discrete:  # [-1, 1] in n equal bins (discrete_action: the same, batched)
-            return int(min(self.discrete - 1, max(0, math.floor((a[0] + 1.0) / 2.0 * self.discrete))))
-        return (a * self._action_scale).astype(np.float32)
+            bins = np.clip(np.floor((a[:, 0] + 1.0) / 2.0 * self.discrete), 0.0, self.discrete - 1)
+            return bins.astype(np.int64).tolist()
+        return list((a * self._action_scale).astype(np.float32))
 
     def step(self, state: Tensor, action: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         new = state.detach().cpu().clone()
-        actions = action.detach().cpu().to(torch.float64).numpy()
-        reward = torch.zeros(new.shape[0], dtype=torch.float64)
-        for r in range(new.shape[0]):  # gymnasium steps one environment at a time
-            if new[r, _DONE] != 0:
-                continue
-            if new[r, _ENV] < 0:  # the row's first step: its own environment, from the episode's seed
-                env, _ = self._make(int(new[r, _SEED]))
+        rows = new.numpy()  # the same memory: numpy's element access is what a per-row loop can afford
+        actions = self._actions(action.detach().cpu().to(torch.float64).numpy())
+        reward = np.zeros(rows.shape[0], dtype=np.float64)
+        for r in np.flatnonzero(rows[:, _DONE] == 0).tolist():  # gymnasium steps one environment at a time
+            if rows[r, _ENV] < 0:  # the row's first step: its own environment, from the episode's seed
+                env, _ = self._make(int(rows[r, _SEED]))
                 self._envs.append(env)
-                new[r, _ENV] = len(self._envs) - 1
-            obs, rew, terminated, truncated, _ = self._envs[int(new[r, _ENV])].step(self._action(actions[r]))
-            new[r, _OBS:] = torch.from_numpy(self._vector(obs))
+                rows[r, _ENV] = len(self._envs) - 1
+            obs, rew, terminated, truncated, _ = self._envs[int(rows[r, _ENV])].step(actions[r])
+            rows[r, _OBS:] = self._vector(obs)
             reward[r] = float(rew)
             if terminated or truncated:
-                new[r, _DONE] = 1.0
+                rows[r, _DONE] = 1.0
         done = new[:, _DONE] != 0
-        return new.to(state.device), reward.to(state.device), done.to(state.device)
+        return new.to(state.device), torch.from_numpy(reward).to(state.device), done.to(state.device)
 
     def observe(self, state: Tensor) -> Tensor:
         return state[:, _OBS:]

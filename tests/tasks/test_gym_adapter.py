@@ -1,5 +1,7 @@
 """gymnasium environments as tasks of the seam."""
 
+import pickle
+
 import numpy as np
 import pytest
 import torch
@@ -111,6 +113,31 @@ def test_discrete_and_tuple_observations_are_flattened_one_hot():
     cfg = NEATConfig(num_inputs=16, num_outputs=1, num_bias=1, pop_size=4)
     result = rollout(lake, make_controller(NEAT(cfg, seeds=[0]).ask(), cfg, lake, "sigmoid"), episodes=2, seed=1)
     assert result.returns.shape == (4, 2) and bool(((result.returns == 0) | (result.returns == 1)).all())
+
+
+def test_environments_are_reused_across_rollouts_with_the_results_of_fresh_ones():
+    lake = GymTask("FrozenLake-v1")  # slippery: the moves are drawn from each environment's seeded generator
+    cfg = NEATConfig(num_inputs=16, num_outputs=1, num_bias=1, pop_size=6)
+    genomes = NEAT(cfg, seeds=[0]).ask()
+
+    def returns(task, seed):
+        return rollout(task, make_controller(genomes, cfg, task, "sigmoid"), episodes=3, seed=seed).returns
+
+    first, other, again = returns(lake, 1), returns(lake, 2), returns(lake, 1)
+    assert torch.equal(first, again)  # the reused environments start each episode from its seed
+    assert torch.equal(other, returns(GymTask("FrozenLake-v1"), 2))  # as fresh ones do
+    assert len(lake._envs) + len(lake._pool) <= 18 + 18  # one per row stepped, and the starts' own
+    copy = pickle.loads(pickle.dumps(lake))  # environments stay with their process
+    assert (copy._envs, copy._pool) == ([], []) and torch.equal(returns(copy, 1), first)
+
+
+def test_discrete_observations_one_hot_as_gymnasium_flattens_them():
+    lake = GymTask("FrozenLake-v1")
+    for space in (gym.spaces.Discrete(16), gym.spaces.Discrete(5, start=-2)):
+        lake._space = space
+        for obs in range(space.start, space.start + space.n):
+            vector = lake._vector(np.int64(obs))
+            assert vector.dtype == np.float64 and np.array_equal(vector, gym.spaces.flatten(space, obs))
 
 
 def test_unusable_spaces_are_named():
