@@ -9,7 +9,9 @@ each choice:
 
 - signed input coding (each observation in [-1, 1] about the middle of its bounds);
 - NEAT-SNN: at most ``NETWORK_MS_MAX`` ms of network time per control step, rates over the last
-  ``RATE_WINDOW_STEPS`` control steps, counted from each neuron's rate at rest;
+  ``RATE_WINDOW_STEPS`` control steps, counted from each neuron's rate at rest; ``SYNAPSE``:
+  synapses strong and slow enough that a hidden neuron passes its input's rate change on, twice
+  the paper's background current, and each neuron starting at its own point of its firing cycle;
 - sigmoid NEAT: ``SIGMOID_UPDATES`` network updates per control step, so an input crosses two
   hidden layers within the step instead of one layer per step;
 - ``TASK_GA``: a hidden layer of 16 from the start, sparse per-gene weight steps, and
@@ -26,8 +28,8 @@ import torch
 
 from evolution.specs import SigmoidSpec, SpikingSpec
 
-__all__ = ["TASK_GA", "NETWORK_MS_MAX", "RATE_WINDOW_STEPS", "SIGMOID_UPDATES", "RANDOM_START_EPISODES", "default_spec",
-           "has_random_starts", "default_episodes"]
+__all__ = ["TASK_GA", "NETWORK_MS_MAX", "RATE_WINDOW_STEPS", "SYNAPSE", "SIGMOID_UPDATES", "RANDOM_START_EPISODES",
+           "default_spec", "has_random_starts", "default_episodes"]
 
 # NEATConfig fields task_config sets before the caller's overrides: neat-python 2.0.0's defaults
 # where this NEAT has the knob (the "neat-python" GA preset), the best 10 % as parents, a hidden
@@ -41,14 +43,20 @@ TASK_GA: dict = dict(
 )
 NETWORK_MS_MAX = 10.0  # ms of network time per control step at most (NEAT-SNN)
 RATE_WINDOW_STEPS = 3  # control steps in NEAT-SNN's rate window
+# NEAT-SNN's synapses, background and start: 30 mV per spike per unit weight spread over 10 ms
+# (the paper's 1 mV in one substep moves a hidden neuron by 0.7 % of its input's rate change;
+# this passes about a third), 60 mV/ms of background (more spikes per control step), and a
+# "spread" start (no synchronous first volley through the strong synapses).
+SYNAPSE: dict = dict(synapse_kick_mv=30.0, synapse_tau_ms=10.0, i_background=60.0, start="spread")
 SIGMOID_UPDATES = 3  # sigmoid network updates per control step
 RANDOM_START_EPISODES = 16  # fresh episodes per genome per generation on a task with random starts
 
 
 def default_spec(task, controller: str) -> SpikingSpec | SigmoidSpec:
     """The spec of ``controller`` (``"snn"`` or ``"sigmoid"``) for ``task``: signed inputs, and
-    NEAT-SNN's rates over one control step of at most ``NETWORK_MS_MAX`` ms of network time,
-    counted from rest; sigmoid NEAT's ``SIGMOID_UPDATES`` updates per step (module docstring)."""
+    NEAT-SNN's rates over ``RATE_WINDOW_STEPS`` control steps of at most ``NETWORK_MS_MAX`` ms of
+    network time each, counted from rest, with ``SYNAPSE``'s synapses, background and start;
+    sigmoid NEAT's ``SIGMOID_UPDATES`` updates per step (module docstring)."""
     if controller == "sigmoid":
         return SigmoidSpec(input_coding="signed", updates_per_step=SIGMOID_UPDATES)
     if controller != "snn":
@@ -62,7 +70,7 @@ def default_spec(task, controller: str) -> SpikingSpec | SigmoidSpec:
         # a period that is no whole number of substeps runs the whole substeps within it
         network_ms = max(1, math.floor(period_ms / base.dt_ms + 1e-9)) * base.dt_ms
     return SpikingSpec(input_coding="signed", rate_window_steps=RATE_WINDOW_STEPS, rest_relative=True,
-                       network_ms=network_ms)
+                       network_ms=network_ms, **SYNAPSE)
 
 
 def has_random_starts(task) -> bool:
