@@ -45,7 +45,7 @@ NETWORK_MS_MAX = 10.0  # ms of network time per control step at most (NEAT-SNN)
 RATE_WINDOW_STEPS = 3  # control steps in NEAT-SNN's rate window
 # NEAT-SNN's synapses, background and start: 30 mV per spike per unit weight spread over 10 ms
 # (the paper's 1 mV in one substep moves a hidden neuron by 0.7 % of its input's rate change;
-# this passes about a third), 60 mV/ms of background (more spikes per control step), and a
+# these pass 23 % at this background), 60 mV/ms of background (more spikes per control step), and a
 # "spread" start (no synchronous first volley through the strong synapses).
 SYNAPSE: dict = dict(synapse_kick_mv=30.0, synapse_tau_ms=10.0, i_background=60.0, start="spread")
 SIGMOID_UPDATES = 3  # sigmoid network updates per control step
