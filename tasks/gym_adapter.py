@@ -292,17 +292,16 @@ class GymTask(Task):
             self._pool.append(env)
         return state.to(device)
 
-    def _actions(self, a: np.ndarray) -> list:
-        """Each row's gymnasium action from ``a`` ``[B, action_size]`` (float64)."""
-        if self.discrete:  # [-1, 1] in n equal bins (discrete_action: the same, batched)
-            bins = np.clip(np.floor((a[:, 0] + 1.0) / 2.0 * self.discrete), 0.0, self.discrete - 1)
-            return bins.astype(np.int64).tolist()
-        return list((a * self._action_scale).astype(np.float32))
+    def _actions(self, action: Tensor) -> list:
+        """Each row's gymnasium action from the controllers' ``action`` ``[B, action_size]``."""
+        if self.discrete:  # [-1, 1] in n equal bins, as the ports bin it
+            return discrete_action(action, self.discrete).to(torch.int64).tolist()
+        return list((action.to(torch.float64).numpy() * self._action_scale).astype(np.float32))
 
     def step(self, state: Tensor, action: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         new = state.detach().cpu().clone()
         rows = new.numpy()  # the same memory: numpy's element access is what a per-row loop can afford
-        actions = self._actions(action.detach().cpu().to(torch.float64).numpy())
+        actions = self._actions(action.detach().cpu())
         reward = np.zeros(rows.shape[0], dtype=np.float64)
         for r in np.flatnonzero(rows[:, _DONE] == 0).tolist():  # gymnasium steps one environment at a time
             if rows[r, _ENV] < 0:  # the row's first step: its own environment, from the episode's seed
