@@ -10,7 +10,8 @@ Parts:
   networks of 8 nodes whose plant never fails (failure limits lifted), one thread. A long
   episode of one row (``--long-steps`` control steps) against 9000 rows for 200 steps: microseconds
   per control step at batch 1 against per row-step in the batch, and their ratio, for NEAT-SNN and
-  sigmoid NEAT, natively (``evolution.kernels.episodes``) and through the Python loop (``native=False``).
+  sigmoid NEAT, natively (``evolution.kernels.episodes``) and through the Python loop (``native=False``);
+  and NEAT-SNN natively on Table I's task (Bernoulli-coded inputs, random two-hidden networks).
 - ``table2``, ``table1``: ``snn-neat reproduce table2|table1 --runs 60`` with the default settings,
   as a user runs it: wall and CPU seconds (this process's children).
 - ``dpv``, ``dpnv``: ``snn-neat reproduce dpv|dpnv --runs N --no-generalization`` (seeds
@@ -69,7 +70,35 @@ def _step_costs(long_steps: int, repeats: int) -> list[tuple[str, str, float, fl
                 t9.append((time.perf_counter() - t0) / (200 * 9000))
                 assert int(r.steps.min()) == n1 and int(r9.steps.min()) == 200, "every row runs the whole episode"
             out.append((kind, path, statistics.median(t1) * 1e6, statistics.median(t9) * 1e6))
+    out.append(_table1_step_cost(long_steps, repeats))
     return out
+
+
+def _table1_step_cost(long_steps: int, repeats: int) -> tuple[str, str, float, float]:
+    """The same for NEAT-SNN on Table I (Bernoulli-coded inputs, 40 substeps per control step):
+    random two-hidden networks of its study config, natively."""
+    import dataclasses
+
+    from evolution import random_genomes
+    from tasks.studies.cartpole import paper_task, study_config, study_spec
+
+    task = paper_task("table1", plant=CartPoleParams(x_limit=1e30, theta_limit=1e30))
+    spec = study_spec("table1", "snn")
+    wide = random_genomes(dataclasses.replace(study_config("table1", "snn"), pop_size=9000), hidden=2, density=0.5,
+                          seed=0)
+    one = wide.gather(torch.zeros(1, 1, dtype=torch.int64))
+    cfg = study_config("table1", "snn")
+    ctl1, ctl9 = make_controller(one, cfg, task, spec), make_controller(wide, cfg, task, spec)
+    rollout(task, ctl1, max_steps=2)
+    t1, t9 = [], []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        rollout(task, ctl1, max_steps=long_steps)
+        t1.append((time.perf_counter() - t0) / long_steps)
+        t0 = time.perf_counter()
+        rollout(task, ctl9, max_steps=200)
+        t9.append((time.perf_counter() - t0) / (200 * 9000))
+    return "snn, Table I's Bernoulli inputs", "native episodes", statistics.median(t1) * 1e6, statistics.median(t9) * 1e6
 
 
 def _study(args: list[str], folder: Path) -> tuple[float, float, dict]:

@@ -155,6 +155,31 @@ def test_bernoulli_sources_drawn_in_c_equal_the_torch_draws(dtype):
     assert all(torch.equal(a, b) for a, b in zip(ker, ref, strict=True))
 
 
+@needs_cc
+def test_bernoulli_draws_in_c_equal_torch_at_the_boundary_of_each_probability():
+    # the C kernel compares draws as 53-bit integers against ceil(p 2^53): probabilities set to a
+    # draw's own value (u < p false) and one ulp either side, and 0, 1, above 1 and below 0
+    from snn_torch.functional.counter_rng import BernoulliSources, uniform01
+
+    rows, n_src, substeps, base = 12, 3, 20, 40
+    w, net, i, _ = _case(6, rows, 10, torch.float64, seed=3)
+    keys = torch.randint(-(2**62), 2**62, (rows,), generator=torch.Generator().manual_seed(4))
+    drawn = uniform01(keys.view(rows, 1), torch.arange(n_src).view(1, n_src) + base + 7 * n_src)  # substep 7's
+    variant = (torch.arange(rows) % 3).view(rows, 1)  # the draw, one ulp above, one ulp below
+    prob = torch.where(variant == 0, drawn, torch.nextafter(drawn, (variant == 1).to(torch.float64)))
+    prob[0] = torch.tensor([0.0, 1.0, 1.5])
+    prob[1] = torch.tensor([-0.25, -0.0, 2.0**-53])
+    sources = BernoulliSources(prob, keys, base)
+    state = recurrent_init((rows, 10), QIU2019, dtype=torch.float64)
+    c_ker, _ = network_steps_kernel(i, state, w, QIU2019, dt_ms=0.5, substeps=substeps, network=net,
+                                    source_spikes=sources)
+    c_ref, _ = recurrent_izhikevich_steps(i, state, w[net], QIU2019, substeps=substeps,
+                                          source_spikes=sources.spikes(substeps, torch.float64))
+    assert torch.equal(c_ker[:, :n_src], c_ref[:, :n_src])
+    assert torch.equal(c_ker, c_ref)
+    assert c_ref[0, :n_src].tolist() == [0.0, substeps, substeps]  # never, always, always
+
+
 def test_sigmoid_twin_refuses_bad_network_indices_and_matches_a_row_alone():
     from snn_torch.modules.recurrent import PopulationRecurrentSigmoid
 

@@ -136,8 +136,7 @@ typedef struct {
     T ss[LANES * MAXN]; /* synaptic currents (exponential synapses only) */
     const T *W[LANES];
     T *wbuf, *hist;
-    unsigned char *draws;
-    double *prob;
+    T *draws; /* a control step's Bernoulli spikes (0 or 1) of each lane, [lane][substep][source] */
 } FN(spiking_lanes_t_);
 
 static void FN(spiking_reset_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, int64_t k, int64_t r);
@@ -189,23 +188,27 @@ static void FN(spiking_step_)(FN(spiking_lanes_t_) *S, const FN(spiking_t_) *c, 
             S->cnt[k * np + j] = 0;
         }
         if (bern) {
+            /* the whole control step's draws at once, counter m = substep * n_x + source; the
+               sources' counts are whole numbers, so summing them here equals the substeps' sums */
             const int64_t g = L->row[k] / p->episodes;
             const uint64_t key = (uint64_t)c->keys[g];
             const int64_t base = tt[k] * M;
-            double *pm = S->prob; /* each counter's probability, then one flat loop (vectorised) */
-            for (int64_t i = 0; i < n_x; ++i) pm[i] = (double)(x[i] * gain);
-            for (int64_t m = n_x; m < M; ++m) pm[m] = pm[m - n_x];
-            unsigned char *dk = S->draws + k * M;
-            for (int64_t m = 0; m < M; ++m) dk[m] = uniform01(key, (uint64_t)(base + m)) < pm[m];
+            T *restrict dk = S->draws + k * M;
+            for (int64_t i = 0; i < n_x; ++i) {
+                const int64_t below = uniform01_threshold((double)(x[i] * gain));
+                int64_t total = 0;
+                for (int64_t q = 0; q < c->substeps; ++q) {
+                    const int64_t s = uniform01_bits(key, (uint64_t)(base + q * n_x + i)) < below;
+                    dk[q * n_x + i] = (T)s;
+                    total += s;
+                }
+                S->cnt[k * np + i] = (T)total;
+            }
         }
     }
     for (int64_t q = 0; q < c->substeps; ++q) {
         for (int64_t k = 0; k < lanes && bern; ++k)
-            for (int64_t i = 0; i < n_x; ++i) {
-                const T s = S->draws[k * M + q * n_x + i] ? (T)1 : (T)0;
-                S->zz[k * np + i] = s;
-                S->cnt[k * np + i] += s;
-            }
+            memcpy(S->zz + k * np, S->draws + k * M + q * n_x, (size_t)n_x * sizeof(T));
         LANE_WIDTHS(SIZED(IZH_LANES(S->vv, S->uu, S->zz, S->W, S->I, S->cnt, L_, N_, n_src, n, dt, a, b, cc, d, vpeak,
                                     ss, sk, sk1),
                           IZH_LANES(S->vv, S->uu, S->zz, S->W, S->I, S->cnt, L_, np, n_src, n, dt, a, b, cc, d, vpeak,
@@ -362,9 +365,8 @@ int64_t FN(episodes_spiking_)(const episodes_io *io, const spiking_params *sp) {
         if (ok) {
             S->wbuf = (T *)calloc((size_t)(LANES * np * np), sizeof(T));
             S->hist = (T *)calloc((size_t)(LANES * window * np), sizeof(T));
-            S->draws = (unsigned char *)malloc((size_t)(LANES * (substeps * n_in > 0 ? substeps * n_in : 1)));
-            S->prob = (double *)malloc((size_t)(substeps * n_in > 0 ? substeps * n_in : 1) * sizeof(double));
-            ok = S->wbuf && S->hist && S->draws && S->prob;
+            S->draws = (T *)malloc((size_t)(LANES * (substeps * n_in > 0 ? substeps * n_in : 1)) * sizeof(T));
+            ok = S->wbuf && S->hist && S->draws;
         }
         if (!ok) FN(fail_)(error, 4, -1, 0);
         for (int64_t k = 0; ok && k < LANES; ++k) S->W[k] = S->wbuf + k * np * np;
@@ -389,7 +391,7 @@ int64_t FN(episodes_spiking_)(const episodes_io *io, const spiking_params *sp) {
             }
             RETIRE(FN(spiking_move_)(S, &ctrl, lanes - 1, k))
         }
-        if (S) { free(S->wbuf); free(S->hist); free(S->draws); free(S->prob); }
+        if (S) { free(S->wbuf); free(S->hist); free(S->draws); }
         free(S);
         FN(lanes_free_)(&L);
     }

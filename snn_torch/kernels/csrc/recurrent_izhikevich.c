@@ -93,7 +93,6 @@ static inline void NAME##_update(T *vv, T *uu, T *zz, const T *it, const T *I, T
 static inline void NAME##_input(const T *zz, const T *W, T *it, int64_t n) {                   \
     for (int64_t j = 0; j < n; ++j) it[j] = 0;                                                 \
     for (int64_t k = 0; k < n; ++k) {                                                          \
-        if (zz[k] == 0) continue;                                                              \
         const T *Wk = W + k * n;                                                               \
         for (int64_t j = 0; j < n; ++j) it[j] += zz[k] * Wk[j];                                \
     }                                                                                          \
@@ -143,12 +142,12 @@ void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *
         memset(ss, 0, sizeof ss);                                                              \
         T cnt[LANES * MAXN]; const T *W[LANES];                                                        \
         T *wbuf = (T *)calloc(LANES * np * np, sizeof(T)); /* padding stays 0: no synapses */  \
-        /* Bernoulli draws of a chunk's control step, drawn before its substeps in one flat loop \
-           over counters (vectorised), read back in the substeps: the same draws, compared alike. */ \
+        /* Bernoulli spikes of a chunk's control step, drawn before its substeps (counter       \
+           substep * n_src + source) and compared as integers (uniform01_threshold: the same    \
+           decisions as uniform01 < p), read back in the substeps. */                          \
         const int64_t M = substeps * n_src;                                                    \
         const int bern = !src && n_src;                                                        \
-        unsigned char *draws = bern ? (unsigned char *)malloc(LANES * M) : NULL;               \
-        double *pm = bern ? (double *)malloc(M * sizeof(double)) : NULL;                       \
+        T *draws = bern ? (T *)malloc(LANES * M * sizeof(T)) : NULL;                           \
         memset(vv, 0, sizeof vv); memset(uu, 0, sizeof uu); memset(zz, 0, sizeof zz);          \
         memset(I, 0, sizeof I);                                                                \
         for (int k = 0; k < LANES; ++k) W[k] = wbuf + k * np * np;                             \
@@ -177,19 +176,21 @@ void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *
             for (int64_t k = 0; k < lanes && bern; ++k) {                                      \
                 const int64_t r = r0 + k;                                                      \
                 const uint64_t key = (uint64_t)keys[r];                                        \
-                unsigned char *dk = draws + k * M;                                             \
-                for (int64_t m = 0; m < M; ++m) pm[m] = prob[r * n_src + m % n_src];           \
-                for (int64_t m = 0; m < M; ++m)                                                \
-                    dk[m] = uniform01(key, (uint64_t)(base + m)) < pm[m];                      \
+                T *dk = draws + k * M;                                                         \
+                for (int64_t i = 0; i < n_src; ++i) {                                          \
+                    const int64_t below = uniform01_threshold(prob[r * n_src + i]);            \
+                    for (int64_t q = 0; q < substeps; ++q)                                     \
+                        dk[q * n_src + i] =                                                    \
+                            uniform01_bits(key, (uint64_t)(base + q * n_src + i)) < below ? (T)1 : (T)0; \
+                }                                                                              \
             }                                                                                  \
             for (int64_t q = 0; q < substeps; ++q) {                                           \
                 for (int64_t k = 0; k < lanes && n_src; ++k) {                                 \
                     const int64_t r = r0 + k;                                                  \
+                    const T *sq = src ? src + (r * substeps + q) * n_src : draws + k * M + q * n_src; \
                     for (int64_t i = 0; i < n_src; ++i) {                                      \
-                        T s = src ? src[(r * substeps + q) * n_src + i]                       \
-                                  : (draws[k * M + q * n_src + i] ? (T)1 : (T)0);            \
-                        zz[k * np + i] = s;                                                    \
-                        cnt[k * np + i] += s;                                                  \
+                        zz[k * np + i] = sq[i];                                                \
+                        cnt[k * np + i] += sq[i];                                              \
                     }                                                                          \
                 }                                                                              \
                 LANE_WIDTHS(SIZED(PREFIX##_lanes(vv, uu, zz, W, I, cnt, L_, N_, n_src, n, dt, a, b, c, d, vpeak, \
@@ -206,7 +207,7 @@ void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *
                 if (s) memcpy(s + r * n, ss + k * np, n * sizeof(T));                          \
             }                                                                                  \
         }                                                                                      \
-        free(wbuf); free(draws); free(pm);                                                     \
+        free(wbuf); free(draws);                                                     \
     }                                                                                          \
 }
 DEFINE_STEPS(izh_network_steps_f32, izh_f32, float)
