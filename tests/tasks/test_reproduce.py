@@ -243,3 +243,15 @@ def test_the_tables_signed_coding_is_a_sensitivity_study_of_the_same_runs(tmp_pa
     assert "Input coding: signed (`--coding signed`, a sensitivity study" in (tmp_path / "signed" / "table2.md").read_text()
     with pytest.raises(ReproduceError, match="cannot resume .* coding='signed', this call asks for coding='study'"):
         run_controller("table2", "sigmoid", [0, 1], 3, tmp_path / "signed", progress=False, resume=True)
+
+
+def test_dpv_default_setup_restarts_a_stagnant_population_and_dpnv_first_setup_does_not():
+    # DPV's tuned GA carries NEAT 2002's whole-population stagnation (delta coding after 20
+    # generations without a better genome); the other studies' tuned GAs keep theirs
+    from tasks.studies.registry import STUDIES
+
+    for controller in ("snn", "sigmoid"):
+        assert STUDIES["dpv"].config(controller).population_stagnation == 20
+        assert STUDIES["dpv"].config(controller, setup="neat-1.2.1").population_stagnation == 20  # its own file's
+        assert STUDIES["dpnv"].config(controller, setup="neat-2002").population_stagnation == 0
+        assert STUDIES["table2"].config(controller).population_stagnation == 0
