@@ -362,7 +362,8 @@ class Study:
 _NEAT_PYTHON_01 = ("neat-python", MappingProxyType({"survival_threshold": 0.1}))
 # DPV's: the same with NEAT 2002's whole-population stagnation ("delta coding": after 20
 # generations without a better genome only the two best species breed; NEAT C++ 1.2.1 does it
-# too), which ended the two DPV failures of NEAT-SNN in 280 runs (seeds 38 and 5127)
+# too): NEAT-SNN's DPV failures 4 of 180 without it, 2 with it, side by side on seeds 0-59,
+# 5100-5159 and 5200-5259, in as many evaluations (docs/lab-notebook-double-pole.md)
 _NEAT_PYTHON_01_DELTA = ("neat-python", MappingProxyType({"survival_threshold": 0.1, "population_stagnation": 20}))
 _NEAT_CPP = ("neat-c++", MappingProxyType({}))
 _PAPER_REPORT = "tasks.studies.table_report:write_table_report"
@@ -378,8 +379,8 @@ def _both(setups: dict) -> Mapping:
 
 
 # Each controller's best setup for the double pole, as the study's default (``--setup best``): DPV,
-# NEAT 1.2.1's signed coding with the tuned GA (seeds 100-199: 100/100 for both, 1,215 and 3,371
-# evaluations as NEAT 1.2.1 counts them, against its 3,605); DPNV, sigmoid NEAT with the per-gene
+# NEAT 1.2.1's signed coding with the tuned GA (seeds 100-199, before the GA's restart: 100/100 for
+# both, 1,215 and 3,371 evaluations as NEAT 1.2.1 counts them, against its 3,605); DPNV, sigmoid NEAT with the per-gene
 # pick, 64 fitness starts and solutions holding 250 of the 625 starts (seeds 2000-2199: 200/200,
 # 7,585 evaluations, generalisation 313.7), NEAT-SNN with push-pull inputs, 4 fitness starts, the
 # short pole in the damping term and population 100 (seeds 9000-9099: 100/100 within 100,000

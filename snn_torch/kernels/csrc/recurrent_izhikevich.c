@@ -207,7 +207,7 @@ void NAME(T *v, T *u, T *z, T *counts, const T *w, const int64_t *net, const T *
                 if (s) memcpy(s + r * n, ss + k * np, n * sizeof(T));                          \
             }                                                                                  \
         }                                                                                      \
-        free(wbuf); free(draws);                                                     \
+        free(wbuf); free(draws);                                                               \
     }                                                                                          \
 }
 DEFINE_STEPS(izh_network_steps_f32, izh_f32, float)
