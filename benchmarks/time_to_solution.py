@@ -28,6 +28,7 @@ costs, interleaved so drift hits every path alike.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import resource
 import statistics
@@ -40,11 +41,27 @@ from pathlib import Path
 import torch
 from scale import random_chunk  # noqa: E402 - the benchmarks' random networks (run from benchmarks/)
 
-from evolution import make_controller, rollout
+from evolution import make_controller, random_genomes, rollout
 from tasks.cartpole import CartPoleParams, CartPoleTask
+from tasks.studies.cartpole import paper_task, study_config, study_spec
 
 PARTS = ("steps", "table2", "table1", "dpv", "dpnv")
 NEAT_CPP_PER_SOLVED_RUN_S = {"dpv": 0.39, "dpnv": 5.0}  # NEAT C++ 1.2.1 on this machine kind (issue 28)
+
+
+def _costs(task, ctl1, ctl9, n1: int, repeats: int, native: bool = True) -> tuple[float, float]:
+    """Medians over ``repeats`` of us per control step of ``ctl1`` (one genome, ``n1`` steps) and
+    us per row-step of ``ctl9`` (9000 genomes, 200 steps), interleaved."""
+    t1, t9 = [], []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        r = rollout(task, ctl1, max_steps=n1, native=native)
+        t1.append((time.perf_counter() - t0) / n1)
+        t0 = time.perf_counter()
+        r9 = rollout(task, ctl9, max_steps=200, native=native)
+        t9.append((time.perf_counter() - t0) / (200 * 9000))
+        assert int(r.steps.min()) == n1 and int(r9.steps.min()) == 200, "every row runs the whole episode"
+    return statistics.median(t1) * 1e6, statistics.median(t9) * 1e6
 
 
 def _step_costs(long_steps: int, repeats: int) -> list[tuple[str, str, float, float]]:
@@ -60,45 +77,21 @@ def _step_costs(long_steps: int, repeats: int) -> list[tuple[str, str, float, fl
         rollout(task, ctl1, max_steps=2)  # builds and binds the kernels
         for native, path in ((True, "native episodes"), (False, "Python loop")):
             n1 = long_steps if native else max(long_steps // 20, 200)
-            t1, t9 = [], []
-            for _ in range(repeats):
-                t0 = time.perf_counter()
-                r = rollout(task, ctl1, max_steps=n1, native=native)
-                t1.append((time.perf_counter() - t0) / n1)
-                t0 = time.perf_counter()
-                r9 = rollout(task, ctl9, max_steps=200, native=native)
-                t9.append((time.perf_counter() - t0) / (200 * 9000))
-                assert int(r.steps.min()) == n1 and int(r9.steps.min()) == 200, "every row runs the whole episode"
-            out.append((kind, path, statistics.median(t1) * 1e6, statistics.median(t9) * 1e6))
-    out.append(_table1_step_cost(long_steps, repeats))
+            out.append((kind, path, *_costs(task, ctl1, ctl9, n1, repeats, native)))
+    out.append(("snn, Table I's Bernoulli inputs", "native episodes", *_table1_step_costs(long_steps, repeats)))
     return out
 
 
-def _table1_step_cost(long_steps: int, repeats: int) -> tuple[str, str, float, float]:
-    """The same for NEAT-SNN on Table I (Bernoulli-coded inputs, 40 substeps per control step):
-    random two-hidden networks of its study config, natively."""
-    import dataclasses
-
-    from evolution import random_genomes
-    from tasks.studies.cartpole import paper_task, study_config, study_spec
-
+def _table1_step_costs(long_steps: int, repeats: int) -> tuple[float, float]:
+    """``_costs`` for NEAT-SNN on Table I (Bernoulli-coded inputs, 40 substeps per control step):
+    random two-hidden networks of its study config, failure limits lifted."""
     task = paper_task("table1", plant=CartPoleParams(x_limit=1e30, theta_limit=1e30))
-    spec = study_spec("table1", "snn")
-    wide = random_genomes(dataclasses.replace(study_config("table1", "snn"), pop_size=9000), hidden=2, density=0.5,
-                          seed=0)
+    spec, cfg = study_spec("table1", "snn"), study_config("table1", "snn")
+    wide = random_genomes(dataclasses.replace(cfg, pop_size=9000), hidden=2, density=0.5, seed=0)
     one = wide.gather(torch.zeros(1, 1, dtype=torch.int64))
-    cfg = study_config("table1", "snn")
     ctl1, ctl9 = make_controller(one, cfg, task, spec), make_controller(wide, cfg, task, spec)
     rollout(task, ctl1, max_steps=2)
-    t1, t9 = [], []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        rollout(task, ctl1, max_steps=long_steps)
-        t1.append((time.perf_counter() - t0) / long_steps)
-        t0 = time.perf_counter()
-        rollout(task, ctl9, max_steps=200)
-        t9.append((time.perf_counter() - t0) / (200 * 9000))
-    return "snn, Table I's Bernoulli inputs", "native episodes", statistics.median(t1) * 1e6, statistics.median(t9) * 1e6
+    return _costs(task, ctl1, ctl9, long_steps, repeats)
 
 
 def _study(args: list[str], folder: Path) -> tuple[float, float, dict]:
