@@ -56,7 +56,9 @@ def main() -> None:
     print("|---|---|---|---|---|---|")
     for env_id in PORTS:
         bounds = {"observation_bounds": CARTPOLE_BOUNDS} if env_id == "CartPole-v1" else {}
-        paths = {"adapter": GymTask(env_id, adapter=True, **bounds), "port": GymTask(env_id, **bounds)}
+        port = GymTask(env_id, **bounds)
+        coding = {"discrete_actions": "bins"} if port.discrete else {}  # the port's action coding: one network
+        paths = {"adapter": GymTask(env_id, adapter=True, **coding, **bounds), "port": port}
         for rows in args.rows:
             sizes = {"adapter": min(rows, args.adapter_rows), "port": rows}
             for name, task in paths.items():

@@ -9,7 +9,10 @@ each choice:
 
 - signed input coding (each observation in [-1, 1] about the middle of its bounds);
 - NEAT-SNN: at most ``NETWORK_MS_MAX`` ms of network time per control step, rates over the last
-  ``RATE_WINDOW_STEPS`` control steps, counted from each neuron's rate at rest; ``SYNAPSE``:
+  ``RATE_WINDOW_STEPS`` control steps, counted from each neuron's rate at rest; where the task's
+  observations are categories (``discrete_observations``: a grid cell, a card) that jump from
+  step to step, rates over the one step, of ``RATE_WINDOW_STEPS * NETWORK_MS_MAX`` ms, so they
+  are counted over as long, without mixing one step's category into the next; ``SYNAPSE``:
   synapses strong and slow enough that a hidden neuron passes its input's rate change on, twice
   the paper's background current, and each neuron starting at its own point of its firing cycle;
 - sigmoid NEAT: ``SIGMOID_UPDATES`` network updates per control step, so an input crosses two
@@ -55,12 +58,16 @@ RANDOM_START_EPISODES = 16  # fresh episodes per genome per generation on a task
 def default_spec(task, controller: str) -> SpikingSpec | SigmoidSpec:
     """The spec of ``controller`` (``"snn"`` or ``"sigmoid"``) for ``task``: signed inputs, and
     NEAT-SNN's rates over ``RATE_WINDOW_STEPS`` control steps of at most ``NETWORK_MS_MAX`` ms of
-    network time each, counted from rest, with ``SYNAPSE``'s synapses, background and start;
-    sigmoid NEAT's ``SIGMOID_UPDATES`` updates per step (module docstring)."""
+    network time each (over one step of ``RATE_WINDOW_STEPS * NETWORK_MS_MAX`` ms where
+    ``task.discrete_observations``), counted from rest, with ``SYNAPSE``'s synapses, background
+    and start; sigmoid NEAT's ``SIGMOID_UPDATES`` updates per step (module docstring)."""
     if controller == "sigmoid":
         return SigmoidSpec(input_coding="signed", updates_per_step=SIGMOID_UPDATES)
     if controller != "snn":
         raise ValueError(f"controller must be 'snn' or 'sigmoid', got {controller!r}")
+    if getattr(task, "discrete_observations", False):  # categories: one step's, counted as long as a window
+        return SpikingSpec(input_coding="signed", rate_window_steps=1, rest_relative=True,
+                           network_ms=RATE_WINDOW_STEPS * NETWORK_MS_MAX, **SYNAPSE)
     base = SpikingSpec()
     period_ms = float(task.control_period_s) * 1000.0
     network_ms = None

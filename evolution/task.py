@@ -15,6 +15,9 @@ plots and checkpoints work on it. Subclass ``Task`` and give:
 - ``step(state, action)``: ``(next_state, reward [B], terminated [B] bool)``.
 - ``observe(state)``: ``[B, observation_size]``.
 - ``fitness``: ``"return"`` (sum of rewards) or ``"steps"`` (control steps survived).
+- ``discrete_observations``: True where the observations are categories (one-hot codes, a grid
+  cell) that jump from step to step rather than measurements of a continuous state; the
+  defaults then read them one control step at a time (``evolution.defaults.default_spec``).
 
 Everything is batched over rows: the rollout (``evolution.rollout``) runs every genome x every
 episode as one batch and calls each method once per control step. Write the plant as tensor
@@ -130,6 +133,7 @@ class Task(ABC):
     max_steps: int = 1000
     control_period_s: float = 0.02
     fitness: str = "return"
+    discrete_observations: bool = False  # categories that jump from step to step (module docstring)
     native: NativeStep | None = None  # the step in C, for whole episodes in one native call
 
     @property
@@ -171,6 +175,9 @@ class Task(ABC):
             if not ok or isinstance(value, bool):
                 raise TaskError(f"task {self.name!r}: {field} = {value!r} is not valid (action_size and max_steps: "
                                 f"positive ints; action_max, control_period_s: positive; fitness: {FITNESS_KINDS})")
+        if not isinstance(self.discrete_observations, bool):
+            raise TaskError(f"task {self.name!r}: discrete_observations = {self.discrete_observations!r} must be "
+                            "True or False")
         return self
 
     def bounds(self, *, device: torch.device | str = "cpu", dtype: torch.dtype = torch.float32) -> tuple[Tensor, Tensor]:

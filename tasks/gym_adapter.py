@@ -12,7 +12,8 @@ observations alike); a ``make_kwargs`` the port does not model (anything but Pen
 ``render_mode``, ``max_episode_steps``, ...) falls back to the adapter. ``GymTask(env_id,
 adapter=True)`` forces the adapter. The returned port is an instance of its own class
 (``PendulumTask``, ``AcrobotTask``, ...), not of ``GymTask``; it carries the adapter's
-``discrete`` (``n`` of a ``Discrete(n)`` action space, 0 for a ``Box``).
+``discrete`` (``n`` of a ``Discrete(n)`` action space, 0 for a ``Box``) and ``discrete_actions``
+(``"bins"`` where it is discrete: the ports' actions are ordered pushes).
 
 Any other environment runs through the adapter, which makes one gymnasium environment per
 rollout row and steps them from the seam: NEAT, weight search, plots and checkpoints then work
@@ -32,10 +33,17 @@ How the adapter maps onto the seam's functional protocol:
   not a flat ``Box`` is flattened as gymnasium flattens it (``Discrete(n)``: n one-hot values;
   ``Tuple`` and ``Dict``: their parts side by side). Where a variable is unbounded (CartPole's
   velocities) and no ``observation_bounds`` are given, a port uses its own bounds and the adapter
-  estimates them from 8 episodes of random actions (``estimate_bounds``).
-- Actions: a ``Discrete(n)`` space takes one continuous output in ``[-1, 1]`` split into ``n``
-  equal bins (``n = 2``: push left below 0, right above; ``discrete_action``, which the ports
-  use too); a ``Box`` space takes its shape's outputs, scaled to its symmetric bound.
+  estimates them from 8 episodes of random actions (``estimate_bounds``). A space with a
+  ``Discrete``, ``MultiDiscrete`` or ``MultiBinary`` part sets the task's
+  ``discrete_observations``: its observations are categories that jump from step to step, and
+  the defaults read them one step at a time (``evolution.defaults.default_spec``).
+- Actions (``discrete_actions``): a ``Discrete(n)`` space with ``n >= 3`` takes one output per
+  action and steps the largest (``"argmax"``; the first on a tie), since nothing says its
+  actions are ordered (FrozenLake's left, down, right, up are not); ``n = 2``, or
+  ``discrete_actions="bins"``, takes one continuous output in ``[-1, 1]`` split into ``n`` equal
+  bins (``n = 2``: push left below 0, right above; ``discrete_action``, which the ports use
+  too, whose actions are ordered pushes). A ``Box`` space takes its shape's outputs, scaled to
+  its symmetric bound.
 - ``terminated or truncated`` ends an episode; fitness is the return.
 
 This module also holds what the ports share: ``discrete_action`` and ``port_options`` (their
@@ -55,7 +63,7 @@ from torch import Tensor
 from evolution.task import Task, TaskError
 from snn_torch.functional.scalars import scalars
 
-__all__ = ["GymTask", "PORTS", "discrete_action", "port_options"]
+__all__ = ["GymTask", "PORTS", "DISCRETE_ACTIONS", "discrete_action", "port_options"]
 
 _SEED, _ENV, _DONE, _OBS = 0, 1, 2, 3  # state columns
 Bounds = tuple[Sequence[float], Sequence[float]]
@@ -68,6 +76,10 @@ PORTS: dict[str, tuple[str, str, tuple[str, ...]]] = {
     "MountainCarContinuous-v0": ("tasks.mountain_car", "MountainCarContinuousTask", ()),
     "Pendulum-v1": ("tasks.pendulum", "PendulumTask", ("g",)),
 }
+
+
+# how a Discrete(n) action comes from the controller's outputs (module docstring)
+DISCRETE_ACTIONS = ("bins", "argmax")
 
 
 def _gymnasium():
@@ -133,6 +145,19 @@ def flat_space(name: str, obs_space):
     return flat
 
 
+def has_categories(space) -> bool:
+    """Whether ``space`` (a gymnasium space) has a ``Discrete``, ``MultiDiscrete`` or
+    ``MultiBinary`` part, in a ``Tuple`` or ``Dict`` too: observations that are categories."""
+    spaces = _gymnasium().spaces
+    if isinstance(space, (spaces.Discrete, spaces.MultiDiscrete, spaces.MultiBinary)):
+        return True
+    if isinstance(space, spaces.Tuple):
+        return any(has_categories(part) for part in space.spaces)
+    if isinstance(space, spaces.Dict):
+        return any(has_categories(part) for part in space.spaces.values())
+    return False
+
+
 def estimate_bounds(make_env, flatten, low: np.ndarray, high: np.ndarray, max_steps: int) -> tuple[
         np.ndarray, np.ndarray]:
     """``(low, high)`` with each infinite bound replaced from what ``ESTIMATE_EPISODES`` episodes
@@ -181,6 +206,9 @@ class GymTask(Task):
     Args:
         env_id: the registered id, e.g. ``"CartPole-v1"``, ``"Pendulum-v1"``.
         adapter: True to step gymnasium's own environments even where a port exists.
+        discrete_actions: for a ``Discrete(n)`` action space, ``"argmax"`` (one output per action,
+            the largest stepped) or ``"bins"`` (one output in [-1, 1], ``n`` ordered bins);
+            default ``"argmax"`` for ``n >= 3``, ``"bins"`` for ``n = 2`` and on the ports.
         observation_bounds: ``(low, high)`` sequences replacing the observation space's bounds.
             Where the space leaves a variable unbounded and none are given, a port uses its own
             bounds for it and the adapter estimates them (``estimate_bounds``; the variables in
@@ -193,7 +221,7 @@ class GymTask(Task):
 
     fitness = "return"
 
-    def __new__(cls, env_id: str | None = None, *, adapter: bool = False,
+    def __new__(cls, env_id: str | None = None, *, adapter: bool = False, discrete_actions: str | None = None,
                 observation_bounds: Bounds | None = None, max_steps: int | None = None,
                 control_period_s: float | None = None, **make_kwargs):
         # env_id None: unpickling or copying an adapter (object.__reduce_ex__ calls cls.__new__(cls))
@@ -201,10 +229,12 @@ class GymTask(Task):
         if port is None or not set(make_kwargs) <= set(port[2]):
             return super().__new__(cls)
         module, class_name, _ = port
+        port_class = getattr(importlib.import_module(module), class_name)
+        if discrete_actions is not None and not (discrete_actions == "bins" and getattr(port_class, "discrete", 0)):
+            return super().__new__(cls)  # a coding the port does not have: the adapter (which checks it)
         probe = _gymnasium().make(env_id, **make_kwargs)
         space = probe.observation_space
         probe.close()
-        port_class = getattr(importlib.import_module(module), class_name)
         # the space's bounds (as the adapter's, so both paths code alike); the port's where infinite
         low, high = _given_bounds(f"gym:{env_id}", flat_space(f"gym:{env_id}", space), observation_bounds)
         if not (np.isfinite(low).all() and np.isfinite(high).all()):
@@ -217,11 +247,12 @@ class GymTask(Task):
         if control_period_s is not None:
             options["control_period_s"] = control_period_s
         task = port_class(**options)
-        if not hasattr(task, "discrete"):  # the adapter's attribute, on every task GymTask returns
+        if not hasattr(task, "discrete"):  # the adapter's attributes, on every task GymTask returns
             task.discrete = 0
+        task.discrete_actions = "bins" if task.discrete else None
         return task
 
-    def __init__(self, env_id: str, *, adapter: bool = False,
+    def __init__(self, env_id: str, *, adapter: bool = False, discrete_actions: str | None = None,
                  observation_bounds: Bounds | None = None, max_steps: int | None = None,
                  control_period_s: float | None = None, **make_kwargs) -> None:
         gym = _gymnasium()
@@ -232,9 +263,18 @@ class GymTask(Task):
         probe.close()
         flat = flat_space(self.name, obs_space)
         self._space = None if flat is obs_space else obs_space  # None: observations are vectors already
+        self.discrete_observations = has_categories(obs_space)
         low, high = _given_bounds(self.name, flat, observation_bounds)
+        if discrete_actions is not None and (discrete_actions not in DISCRETE_ACTIONS or
+                                             not isinstance(act_space, gym.spaces.Discrete)):
+            raise TaskError(f"task {self.name!r}: discrete_actions must be one of {DISCRETE_ACTIONS} for a Discrete "
+                            f"action space (this one is {act_space}), got {discrete_actions!r}")
+        self.discrete_actions = None
         if isinstance(act_space, gym.spaces.Discrete):
-            self.discrete, self.action_size, self.action_max = int(act_space.n), 1, 1.0
+            self.discrete, self._action_start = int(act_space.n), int(act_space.start)
+            self.discrete_actions = discrete_actions or ("argmax" if self.discrete >= 3 else "bins")
+            self.action_size = self.discrete if self.discrete_actions == "argmax" else 1
+            self.action_max = 1.0
         elif isinstance(act_space, gym.spaces.Box) and len(act_space.shape) == 1 and \
                 np.allclose(act_space.low, -act_space.high) and np.all(np.isfinite(act_space.high)):
             self.discrete, self.action_size = 0, int(act_space.shape[0])
@@ -294,8 +334,10 @@ class GymTask(Task):
 
     def _actions(self, action: Tensor) -> list:
         """Each row's gymnasium action from the controllers' ``action`` ``[B, action_size]``."""
+        if self.discrete_actions == "argmax":  # the largest output's action (torch: the first on a tie)
+            return (torch.argmax(action, dim=1) + self._action_start).tolist()
         if self.discrete:  # [-1, 1] in n equal bins, as the ports bin it
-            return discrete_action(action, self.discrete).to(torch.int64).tolist()
+            return (discrete_action(action, self.discrete).to(torch.int64) + self._action_start).tolist()
         return list((action.to(torch.float64).numpy() * self._action_scale).astype(np.float32))
 
     def step(self, state: Tensor, action: Tensor) -> tuple[Tensor, Tensor, Tensor]:

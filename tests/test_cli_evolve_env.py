@@ -20,7 +20,7 @@ from evolution.rollout import rollout  # noqa: E402
 from tasks.studies.cli import main  # noqa: E402
 from tasks.studies.env_task import resolve_env  # noqa: E402
 from tasks.studies.evolve_env import EvolvePlan, evolve_seeds  # noqa: E402
-from tasks.studies.evolve_env_report import TIMING_FIELDS  # noqa: E402
+from tasks.studies.evolve_env_report import TIMING_FIELDS, _score_digits  # noqa: E402
 from tasks.studies.threshold_runs import TEST_SEED, VALIDATION_EPISODES  # noqa: E402
 from tests.test_cli_errors import _one_line_error  # noqa: E402
 
@@ -120,6 +120,14 @@ def test_a_users_task_by_module_and_class(tmp_path, capsys):
     assert all(r["confirmed_generation"] > 0 and r["reached_threshold"] for r in results["runs"])
     printed = capsys.readouterr().out
     assert "2/2 runs reached -3.5" in printed and printed.count("\n| ") == 3  # the table: header, rule, 2 rows
+    for r in results["runs"]:  # returns of a few units: the test printed to 3 decimals, not rounded onto the bar
+        assert f"| {r['test_mean']:,.3f} | {r['test_worst']:,.3f} |" in printed
+
+
+def test_scores_print_with_the_decimals_that_tell_them_from_the_threshold():
+    assert _score_digits(0.7, [0.69, 0.71]) == 3  # FrozenLake-v1: 0.690 and 0.710, not 0.7 and 0.7
+    assert _score_digits(-200.0, [-227.3, None]) == 1  # Pendulum-v1
+    assert _score_digits(None, [12.0]) == 1 and _score_digits(None, [None]) == 3
 
 
 def test_the_episode_budget_is_spent_and_not_exceeded(tmp_path):

@@ -100,7 +100,8 @@ def test_bin_centres_round_trip_through_the_ports_binning(n):
     ``GymTask`` bin) maps it back to k exactly, in float32 (the controller's) and float64."""
     env_id = {2: "CartPole-v1", 3: "Acrobot-v1"}[n]
     port, _ = gym_task(env_id)  # its bounds (CartPole's velocities are unbounded in gymnasium's space)
-    adapter = GymTask(env_id, adapter=True, observation_bounds=(port.observation_low, port.observation_high))
+    adapter = GymTask(env_id, adapter=True, discrete_actions="bins",
+                      observation_bounds=(port.observation_low, port.observation_high))
     assert adapter.discrete == n
     expected = [-1.0 + (2 * k + 1) / n for k in range(n)]
     assert bin_centres(n, torch.float64).tolist() == expected

@@ -115,16 +115,24 @@ def _fmt(value, digits: int = 1) -> str:
     return f"{value:,.{digits}f}" if isinstance(value, float) else f"{value:,}"
 
 
+def _score_digits(threshold: float | None, scores: list[float | None]) -> int:
+    """Decimals that tell a score from the threshold: 1 where returns run to tens or more, 3
+    where they are fractions (FrozenLake-v1's 0.69 against 0.70 would both print 0.7)."""
+    scale = max([abs(v) for v in (threshold, *scores) if v is not None] or [0.0])
+    return 1 if scale >= 10.0 else 3
+
+
 def summary_table(runs: EnvRuns) -> str:
     """One row per run, then a line on the threshold."""
     thr = runs.built.threshold
+    d = _score_digits(thr, [r.test_mean for r in runs.records])
     lines = ["| seed | generations | confirmed at | training episodes | CPU s to threshold | test mean | test worst "
              "| test std | reached |", "|---|---|---|---|---|---|---|---|---|"]
     for r in runs.records:
         reached = _reached(r, thr)
         lines.append(f"| {r.seed} | {r.generations} | {r.confirmed_generation if r.confirmed_generation > 0 else '-'} "
-                     f"| {_fmt(r.episodes)} | {_fmt(r.confirmed_cpu_s, 2)} | {_fmt(r.test_mean)} | {_fmt(r.test_worst)} "
-                     f"| {_fmt(r.test_std)} | {'-' if reached is None else ('yes' if reached else 'no')} |")
+                     f"| {_fmt(r.episodes)} | {_fmt(r.confirmed_cpu_s, 2)} | {_fmt(r.test_mean, d)} | {_fmt(r.test_worst, d)} "
+                     f"| {_fmt(r.test_std, d)} | {'-' if reached is None else ('yes' if reached else 'no')} |")
     label = LABELS.get(runs.plan.controller, runs.plan.controller)
     episodes = runs.records[0].test_episodes
     if thr is None:

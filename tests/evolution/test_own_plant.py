@@ -74,6 +74,24 @@ def test_the_spec_alone_picks_the_controller():
     assert not torch.equal(by_name(genomes), TaskFitness(task, cfg, SigmoidSpec(), episodes=2)(genomes))
 
 
+def test_the_default_spiking_spec_reads_the_period_and_whether_observations_are_categories():
+    """A measured state: rates over 3 steps of min(period, 10 ms) each (whole 0.5 ms substeps);
+    categories (one-hot cells that jump from step to step): rates over the one step, of 30 ms."""
+    task = PointMass()  # 20 ms per control step
+    spec = default_spec(task, "snn")
+    assert (spec.rate_window_steps, spec.network_ms) == (3, 10.0)
+    task.control_period_s = 0.0042  # not a whole number of substeps: the whole ones within it
+    assert (default_spec(task, "snn").rate_window_steps, default_spec(task, "snn").network_ms) == (3, 4.0)
+    task.control_period_s = 0.005
+    assert default_spec(task, "snn").network_ms is None  # the period itself
+    task.discrete_observations = True
+    for period in (0.005, 0.02, 1.0):  # categories have no time between them to model
+        task.control_period_s = period
+        spec = default_spec(task, "snn")
+        assert (spec.rate_window_steps, spec.network_ms) == (1, 30.0)
+    assert default_spec(task, "sigmoid") == default_spec(PointMass(), "sigmoid")  # reads the current inputs already
+
+
 def test_task_config_reads_the_layout_from_the_task():
     task = PointMass()
     sig = task_config(task, "sigmoid", max_hidden=5)

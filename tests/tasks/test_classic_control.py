@@ -370,10 +370,12 @@ def test_gym_task_gives_the_port_and_the_adapter_on_request():
         bounds = {"observation_bounds": CARTPOLE_BOUNDS} if env_id == "CartPole-v1" else {}
         port = GymTask(env_id, **bounds)
         assert type(port) is cls and not isinstance(port, GymTask)
-        adapter = GymTask(env_id, adapter=True, **bounds)
+        coding = {"discrete_actions": "bins"} if port.discrete else {}  # the ports' ordered bins
+        adapter = GymTask(env_id, adapter=True, **coding, **bounds)
         assert type(adapter) is GymTask and adapter.env_id == env_id
-        # the same task either way: observations, bounds, actions, length (and the adapter's attribute)
-        for field in ("observation_low", "observation_high", "action_size", "action_max", "max_steps", "discrete"):
+        # the same task either way: observations, bounds, actions, length (and the adapter's attributes)
+        for field in ("observation_low", "observation_high", "action_size", "action_max", "max_steps", "discrete",
+                      "discrete_actions", "discrete_observations"):
             assert getattr(port, field) == getattr(adapter, field), (env_id, field)
         again = pickle.loads(pickle.dumps(adapter))
         assert type(again) is GymTask and again.env_id == env_id and again.max_steps == adapter.max_steps
@@ -384,6 +386,9 @@ def test_gym_task_gives_the_port_and_the_adapter_on_request():
     assert GymTask("Pendulum-v1", g=9.81).g == 9.81  # a make_kwargs the port models
     assert type(GymTask("Pendulum-v1", render_mode="rgb_array")) is GymTask  # one it does not: the adapter
     assert GymTask("CartPole-v1").observation_high[1] == GymCartPoleTask().observation_high[1]  # unbounded: the port's
+    # a coding the port does not have is the adapter's; the port's own keeps the port
+    assert type(GymTask("Acrobot-v1", discrete_actions="argmax")) is GymTask
+    assert type(GymTask("Acrobot-v1", discrete_actions="bins")) is AcrobotTask
 
 
 @pytest.mark.parametrize("env_id", [*PORTS, "Pendulum-v1"])
@@ -399,7 +404,9 @@ def test_a_controllers_episodes_on_the_port_are_its_episodes_through_the_adapter
     else:
         tol = {"observation": (F32_ULP, 0.0), "action": (0.0, 0.0), "returns": (1e-9, 1e-9)}
     bounds = {"observation_bounds": CARTPOLE_BOUNDS} if env_id == "CartPole-v1" else {}
-    port, adapter = GymTask(env_id, max_steps=150, **bounds), GymTask(env_id, adapter=True, max_steps=150, **bounds)
+    coding = {"discrete_actions": "bins"} if env_id in ("Acrobot-v1", "MountainCar-v0") else {}  # the ports' bins
+    port, adapter = (GymTask(env_id, max_steps=150, **bounds),
+                     GymTask(env_id, adapter=True, max_steps=150, **coding, **bounds))
     adapter_starts = adapter.reset(2, torch.Generator().manual_seed(7), dtype=torch.float64)
     env = gym.make(env_id)
     port_starts = []

@@ -101,23 +101,23 @@ def test_estimate_bounds_keeps_given_sides_and_opens_still_variables():
 
 def test_discrete_and_tuple_observations_are_flattened_one_hot():
     lake = GymTask("FrozenLake-v1")
-    assert (lake.observation_size, lake.discrete, lake.estimated_bounds) == (16, 4, [])
+    assert (lake.observation_size, lake.discrete, lake.action_size, lake.estimated_bounds) == (16, 4, 4, [])
     assert lake.observation_low == (0.0,) * 16 and lake.observation_high == (1.0,) * 16
     starts = lake.reset(2, torch.Generator().manual_seed(0))
     assert torch.equal(lake.observe(starts)[:, 0], torch.ones(2, dtype=torch.float64))  # the start square
-    moved, _, _ = lake.step(starts, torch.full((2, 1), 0.9))  # bin 3 of 4: up
+    moved, _, _ = lake.step(starts, torch.tensor([[0.0, 0.1, 0.2, 0.9]] * 2))  # the largest output: up
     seen = lake.observe(moved)
     assert bool((seen.sum(1) == 1).all()) and bool(((seen == 0) | (seen == 1)).all())
     cards = GymTask("Blackjack-v1")
     assert cards.observation_size == 32 + 11 + 2
-    cfg = NEATConfig(num_inputs=16, num_outputs=1, num_bias=1, pop_size=4)
+    cfg = NEATConfig(num_inputs=16, num_outputs=4, num_bias=1, pop_size=4)
     result = rollout(lake, make_controller(NEAT(cfg, seeds=[0]).ask(), cfg, lake, "sigmoid"), episodes=2, seed=1)
     assert result.returns.shape == (4, 2) and bool(((result.returns == 0) | (result.returns == 1)).all())
 
 
 def test_environments_are_reused_across_rollouts_with_the_results_of_fresh_ones():
     lake = GymTask("FrozenLake-v1")  # slippery: the moves are drawn from each environment's seeded generator
-    cfg = NEATConfig(num_inputs=16, num_outputs=1, num_bias=1, pop_size=6)
+    cfg = NEATConfig(num_inputs=16, num_outputs=4, num_bias=1, pop_size=6)
     genomes = NEAT(cfg, seeds=[0]).ask()
 
     def returns(task, seed):
@@ -129,6 +129,36 @@ def test_environments_are_reused_across_rollouts_with_the_results_of_fresh_ones(
     assert len(lake._envs) + len(lake._pool) <= 18 + 18  # one per row stepped, and the starts' own
     copy = pickle.loads(pickle.dumps(lake))  # environments stay with their process
     assert (copy._envs, copy._pool) == ([], []) and torch.equal(returns(copy, 1), first)
+
+
+def test_unordered_discrete_actions_take_one_output_each_and_step_the_largest():
+    lake = GymTask("FrozenLake-v1")  # Discrete(4): left, down, right, up, in no order
+    assert (lake.discrete_actions, lake.action_size) == ("argmax", 4)
+    outputs = torch.tensor([[0.1, 0.9, 0.2, 0.3], [0.5, 0.5, 0.1, 0.0], [-1.0, -1.0, -1.0, -0.5], [-1.0] * 4])
+    assert lake._actions(outputs) == [1, 0, 3, 0]  # the largest; the first of a tie
+    lake._action_start = -1  # a Discrete(4, start=-1) space: the same picks, as its actions
+    assert lake._actions(outputs) == [0, -1, 2, -1]
+    binned = GymTask("FrozenLake-v1", discrete_actions="bins")  # asked for: one output in 4 ordered bins
+    assert (binned.discrete_actions, binned.action_size) == ("bins", 1)
+    assert binned._actions(torch.tensor([[-0.9], [-0.4], [0.1], [0.9]])) == [0, 1, 2, 3]
+    cart = GymTask("CartPole-v1", adapter=True)  # Discrete(2): one output, its sign
+    assert (cart.discrete_actions, cart.action_size, cart._actions(torch.tensor([[-0.2], [0.2]]))) == ("bins", 1, [0, 1])
+    assert GymTask("Pendulum-v1", adapter=True).discrete_actions is None  # a Box
+    with pytest.raises(TaskError, match="discrete_actions must be one of"):
+        GymTask("FrozenLake-v1", discrete_actions="softmax")
+    with pytest.raises(TaskError, match=r"discrete_actions .* Discrete action space \(this one is Box"):
+        GymTask("Pendulum-v1", discrete_actions="argmax")
+
+
+def test_category_observations_mark_the_task_and_measurements_do_not():
+    assert GymTask("FrozenLake-v1").discrete_observations  # Discrete(16)
+    assert GymTask("Blackjack-v1").discrete_observations  # a Tuple of Discrete spaces
+    assert not GymTask("CartPole-v1", adapter=True).discrete_observations  # a Box
+    assert not GymTask("CartPole-v1").discrete_observations  # the port, as the Task default
+    lake = GymTask("FrozenLake-v1")
+    lake.discrete_observations = 1  # not a bool: named, not read as truthy
+    with pytest.raises(TaskError, match="discrete_observations = 1 must be True or False"):
+        lake.validate()
 
 
 def test_discrete_observations_one_hot_as_gymnasium_flattens_them():
