@@ -66,18 +66,23 @@ def default_spec(task, controller: str) -> SpikingSpec | SigmoidSpec:
     if controller != "snn":
         raise ValueError(f"controller must be 'snn' or 'sigmoid', got {controller!r}")
     if getattr(task, "discrete_observations", False):  # categories: one step's, counted as long as a window
-        return SpikingSpec(input_coding="signed", rate_window_steps=1, rest_relative=True,
-                           network_ms=RATE_WINDOW_STEPS * NETWORK_MS_MAX, **SYNAPSE)
-    base = SpikingSpec()
-    period_ms = float(task.control_period_s) * 1000.0
-    network_ms = None
+        window, network_ms = 1, RATE_WINDOW_STEPS * NETWORK_MS_MAX
+    else:
+        window, network_ms = RATE_WINDOW_STEPS, _network_ms(float(task.control_period_s) * 1000.0)
+    return SpikingSpec(input_coding="signed", rate_window_steps=window, rest_relative=True, network_ms=network_ms,
+                       **SYNAPSE)
+
+
+def _network_ms(period_ms: float) -> float | None:
+    """NEAT-SNN's network time per control step of ``period_ms`` (ms): at most ``NETWORK_MS_MAX``,
+    whole substeps; None for the period itself."""
+    dt_ms = SpikingSpec().dt_ms
     if period_ms > NETWORK_MS_MAX:
-        network_ms = NETWORK_MS_MAX
-    elif abs(round(period_ms / base.dt_ms) * base.dt_ms - period_ms) > 1e-9:
+        return NETWORK_MS_MAX
+    if abs(round(period_ms / dt_ms) * dt_ms - period_ms) > 1e-9:
         # a period that is no whole number of substeps runs the whole substeps within it
-        network_ms = max(1, math.floor(period_ms / base.dt_ms + 1e-9)) * base.dt_ms
-    return SpikingSpec(input_coding="signed", rate_window_steps=RATE_WINDOW_STEPS, rest_relative=True,
-                       network_ms=network_ms, **SYNAPSE)
+        return max(1, math.floor(period_ms / dt_ms + 1e-9)) * dt_ms
+    return None
 
 
 def has_random_starts(task) -> bool:

@@ -404,9 +404,9 @@ def test_a_controllers_episodes_on_the_port_are_its_episodes_through_the_adapter
     else:
         tol = {"observation": (F32_ULP, 0.0), "action": (0.0, 0.0), "returns": (1e-9, 1e-9)}
     bounds = {"observation_bounds": CARTPOLE_BOUNDS} if env_id == "CartPole-v1" else {}
-    coding = {"discrete_actions": "bins"} if env_id in ("Acrobot-v1", "MountainCar-v0") else {}  # the ports' bins
-    port, adapter = (GymTask(env_id, max_steps=150, **bounds),
-                     GymTask(env_id, adapter=True, max_steps=150, **coding, **bounds))
+    port = GymTask(env_id, max_steps=150, **bounds)
+    coding = {"discrete_actions": "bins"} if port.discrete else {}  # the ports' ordered bins
+    adapter = GymTask(env_id, adapter=True, max_steps=150, **coding, **bounds)
     adapter_starts = adapter.reset(2, torch.Generator().manual_seed(7), dtype=torch.float64)
     env = gym.make(env_id)
     port_starts = []
